@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package isostream needs to build, test and run.
+# Idempotent: apt-get skips what is already there. Run as root or with sudo available.
+set -euo pipefail
+
+PACKAGES=(
+  build-essential cmake pkg-config ccache git
+  # volumes: OpenVDB's CMake config needs boost-iostreams, which libopenvdb-dev does not pull in
+  libopenvdb-dev libboost-iostreams-dev libtbb-dev zlib1g-dev
+  # mesh compression, ray queries, vector math
+  libdraco-dev libembree-dev libglm-dev
+  # headless GL through EGL on Mesa (llvmpipe needs no GPU and no X server)
+  libegl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri libgl-dev
+  # transport
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  # small well-kept libraries: CLI parsing, logging, JSON, PNG
+  libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libpng-dev libxxhash-dev libabsl-dev
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+)
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+echo "install-deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"

@@ -1,0 +1,180 @@
+// Saturated error bounds for the tetrahedral bisection hierarchy (Gerstner §3; the additive
+// saturation of Gerstner, Rumpf & Weikard, "Error indicators for multilevel visualization").
+//
+// Why the bound holds. Let T be a hierarchy tetrahedron with refinement edge (a, b) and
+// refinement vertex x, and T1, T2 its children with refinement vertices y1, y2. On T_i the
+// linear interpolant L_{T_i} f differs from L_T f by w(x) * phi, where
+// w(x) = f(x) - (f(a) + f(b)) / 2 is the wavelet coefficient and phi in [0, 1] is the hat of x
+// on T_i. By induction over the levels (a finest tetrahedron has error 0),
+//   max_T |f_full - L_T f| <= |w(x)| + max_i max_{T_i} |f_full - L_{T_i} f|
+//                          <= |w(x)| + max(eta(y1), eta(y2)).
+// y1 and y2 are children of x in the diamond sense (their diamonds contain T1, T2, whose parent
+// lies in x's diamond), so defining
+//   eta(x) = |w(x)| + max over all diamond children y of eta(y)
+// makes eta(x) an upper bound on every tetrahedron of x's diamond, and eta(child) <= eta(x),
+// which is the saturation that keeps "refine iff eta >= eps" free of hanging nodes: a refined
+// diamond's parents have eta at least as large and are refined too. The wavelet coefficient is
+// the same for every tetrahedron of a diamond because they share the refinement edge.
+//
+// Children of a diamond centred at x with u = 2^h (derived in refinement_vertex.h's terms and
+// checked against the bisection tree in tests/unit/hierarchy_test.cpp):
+//   cube centre : the 6 face centres x +- u e_a            (same h)
+//   face centre : the 4 edge centres x +- u e_a, a odd      (same h)
+//   edge centre : the 8 cube centres x + (+-u/2)^3           (h - 1), those inside the domain
+// Bottom-up order is therefore: for h = 0..k-1, edges, then faces, then cubes.
+#include "server/hierarchy/hierarchy.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "server/hierarchy/refinement_vertex.h"
+
+namespace isostream {
+namespace {
+
+float RoundUp(double v) {
+  float f = static_cast<float>(v);
+  if (static_cast<double>(f) < v) f = std::nextafter(f, INFINITY);
+  return f;
+}
+
+}  // namespace
+
+class HierarchyBuilder {
+ public:
+  explicit HierarchyBuilder(Hierarchy* h) : hier_(*h), k_(h->k_), n_(h->n_), last_(h->n_ - 1) {}
+
+  void Run(const HierarchyBuildOptions& options) {
+    const size_t total = hier_.samples_.size();
+    size_t done = 0;
+    for (int h = 0; h < k_; ++h) {
+      for (DiamondKind kind : {DiamondKind::kEdge, DiamondKind::kFace, DiamondKind::kCube}) {
+        for (int mask = 1; mask < 8; ++mask) {
+          if (3 - __builtin_popcount(static_cast<unsigned>(mask)) != static_cast<int>(kind))
+            continue;
+          done += Pass(h, mask, kind);
+        }
+      }
+      if (options.progress) options.progress(static_cast<double>(done) / total);
+    }
+  }
+
+ private:
+  // One sub-lattice: points of scale h whose odd axes are `mask`. Returns the point count.
+  size_t Pass(int h, int mask, DiamondKind kind) {
+    const int u = 1 << h, step = 2 * u;
+    int start[3], count[3];
+    for (int a = 0; a < 3; ++a) {
+      const bool odd = (mask >> a) & 1;
+      start[a] = odd ? u : 0;
+      count[a] = odd ? (last_ >> (h + 1)) : (last_ >> (h + 1)) + 1;
+    }
+    const float* f = hier_.samples_.data();
+    float* eta = hier_.eta_.data();
+    const ptrdiff_t stride[3] = {1, n_, static_cast<ptrdiff_t>(n_) * n_};
+
+    // Refinement-edge offsets for the odd axes depend on each coordinate's residue mod 4u;
+    // they are resolved per point below. Child offsets are fixed per pass.
+    ptrdiff_t child[8];
+    int child_count = 0;
+    if (kind == DiamondKind::kCube) {
+      for (int a = 0; a < 3; ++a) {
+        child[child_count++] = u * stride[a];
+        child[child_count++] = -u * stride[a];
+      }
+    } else if (kind == DiamondKind::kFace) {
+      for (int a = 0; a < 3; ++a)
+        if ((mask >> a) & 1) {
+          child[child_count++] = u * stride[a];
+          child[child_count++] = -u * stride[a];
+        }
+    }
+
+    tbb::parallel_for(tbb::blocked_range<int>(0, count[2]), [&](const tbb::blocked_range<int>& r) {
+      for (int iz = r.begin(); iz != r.end(); ++iz) {
+        const int z = start[2] + iz * step;
+        for (int iy = 0; iy < count[1]; ++iy) {
+          const int y = start[1] + iy * step;
+          for (int ix = 0; ix < count[0]; ++ix) {
+            const int x = start[0] + ix * step;
+            const int c[3] = {x, y, z};
+            const ptrdiff_t p = x + y * stride[1] + z * stride[2];
+            // Refinement edge: +-u along every odd axis, ends chosen per EvenEndSign.
+            ptrdiff_t edge = 0;
+            for (int a = 0; a < 3; ++a)
+              if ((mask >> a) & 1) edge += EvenEndSign(c[a], h) * u * stride[a];
+            const double w = static_cast<double>(f[p]) -
+                             0.5 * (static_cast<double>(f[p + edge]) + f[p - edge]);
+            float worst = 0.0f;
+            if (kind == DiamondKind::kEdge) {
+              if (h > 0) worst = EdgeChildren(c, h, p, eta, stride);
+            } else {
+              for (int i = 0; i < child_count; ++i) worst = std::max(worst, eta[p + child[i]]);
+            }
+            eta[p] = RoundUp(std::fabs(w) + worst);
+          }
+        }
+      }
+    });
+    return static_cast<size_t>(count[0]) * count[1] * count[2];
+  }
+
+  float EdgeChildren(const int c[3], int h, ptrdiff_t p, const float* eta,
+                     const ptrdiff_t stride[3]) const {
+    const int half = 1 << (h - 1);
+    float worst = 0.0f;
+    for (int s = 0; s < 8; ++s) {
+      ptrdiff_t off = 0;
+      bool inside = true;
+      for (int a = 0; a < 3; ++a) {
+        const int d = (s >> a) & 1 ? half : -half;
+        const int q = c[a] + d;
+        inside &= q >= 0 && q <= last_;
+        off += d * stride[a];
+      }
+      if (inside) worst = std::max(worst, eta[p + off]);
+    }
+    return worst;
+  }
+
+  Hierarchy& hier_;
+  int k_, n_, last_;
+};
+
+absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples, std::vector<float> eta) {
+  const size_t n = static_cast<size_t>(samples.n);
+  if (samples.k < 1 || samples.n != (1 << samples.k) + 1 || samples.values.size() != n * n * n)
+    return absl::InvalidArgumentError("hierarchy: samples are not a (2^k+1)^3 cube");
+  if (!eta.empty() && eta.size() != samples.values.size())
+    return absl::InvalidArgumentError("hierarchy: eta size does not match the samples");
+  auto h = std::make_shared<Hierarchy>();
+  h->k_ = samples.k;
+  h->n_ = samples.n;
+  h->data_dims_ = samples.data_dims;
+  h->samples_ = std::move(samples.values);
+  h->eta_ = std::move(eta);
+  return HierarchyPtr(std::move(h));
+}
+
+absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
+                                            const HierarchyBuildOptions& options) {
+  for (float v : samples.values)
+    if (!std::isfinite(v)) return absl::InvalidArgumentError("hierarchy: non-finite sample");
+  const size_t count = samples.values.size();
+  ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built,
+                             AssembleHierarchy(std::move(samples), std::vector<float>()));
+  auto* h = const_cast<Hierarchy*>(built.get());
+  HierarchyBuilder builder(h);
+  tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    h->eta_.assign(count, 0.0f);  // corners stay 0: they refine nothing
+    builder.Run(options);
+  });
+  return built;
+}
+
+}  // namespace isostream

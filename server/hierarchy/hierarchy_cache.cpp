@@ -1,0 +1,173 @@
+#include "server/hierarchy/hierarchy_cache.h"
+
+#include <xxhash.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include <unistd.h>
+
+namespace isostream {
+namespace {
+
+constexpr char kMagic[8] = {'I', 'S', 'O', 'H', 'I', 'E', 'R', '\0'};
+
+// Fixed-size, explicitly laid out header; all fields little-endian on the hosts we build for.
+struct Header {
+  char magic[8];
+  uint32_t version;
+  uint32_t k;
+  uint32_t n;
+  int32_t data_dims[3];
+  uint64_t samples_hash;
+  uint64_t eta_count;
+  uint64_t eta_hash;
+};
+
+uint64_t SamplesHash(const PaddedSamples& s) {
+  XXH3_state_t* st = XXH3_createState();
+  XXH3_64bits_reset(st);
+  XXH3_64bits_update(st, &s.k, sizeof(s.k));
+  XXH3_64bits_update(st, s.data_dims.data(), sizeof(s.data_dims));
+  XXH3_64bits_update(st, s.values.data(), s.values.size() * sizeof(float));
+  const uint64_t h = XXH3_64bits_digest(st);
+  XXH3_freeState(st);
+  return h;
+}
+
+// Reads the cached eta, or explains why it cannot be used.
+bool ReadCache(const std::string& path, const PaddedSamples& s, uint64_t samples_hash,
+               std::vector<float>* eta, std::string* why) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    *why = "no cache entry";
+    return false;
+  }
+  Header h{};
+  if (!in.read(reinterpret_cast<char*>(&h), sizeof(h))) {
+    *why = "cache header truncated";
+    return false;
+  }
+  const uint64_t count = static_cast<uint64_t>(s.n) * s.n * s.n;
+  if (std::memcmp(h.magic, kMagic, sizeof(kMagic)) != 0) {
+    *why = "cache file has wrong magic";
+    return false;
+  }
+  if (h.version != kHierarchyCacheVersion) {
+    *why = "cache format version " + std::to_string(h.version) + " is not " +
+           std::to_string(kHierarchyCacheVersion);
+    return false;
+  }
+  if (h.k != static_cast<uint32_t>(s.k) || h.n != static_cast<uint32_t>(s.n) ||
+      h.samples_hash != samples_hash || h.eta_count != count) {
+    *why = "cache entry is stale (samples changed)";
+    return false;
+  }
+  eta->resize(count);
+  if (!in.read(reinterpret_cast<char*>(eta->data()), count * sizeof(float))) {
+    *why = "cache payload truncated";
+    return false;
+  }
+  if (XXH3_64bits(eta->data(), count * sizeof(float)) != h.eta_hash) {
+    *why = "cache payload fails its checksum";
+    return false;
+  }
+  return true;
+}
+
+bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples_hash,
+                std::string* why) {
+  std::error_code ec;
+  std::filesystem::create_directories(std::filesystem::path(path).parent_path(), ec);
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    Header h{};
+    std::memcpy(h.magic, kMagic, sizeof(kMagic));
+    h.version = kHierarchyCacheVersion;
+    h.k = static_cast<uint32_t>(hier.k());
+    h.n = static_cast<uint32_t>(hier.n());
+    for (int a = 0; a < 3; ++a) h.data_dims[a] = hier.data_dims()[a];
+    h.samples_hash = samples_hash;
+    h.eta_count = hier.point_count();
+    h.eta_hash = XXH3_64bits(hier.eta(), hier.eta_bytes());
+    out.write(reinterpret_cast<const char*>(&h), sizeof(h));
+    out.write(reinterpret_cast<const char*>(hier.eta()), static_cast<std::streamsize>(hier.eta_bytes()));
+    if (!out.flush()) {
+      *why = "cannot write cache file " + tmp + ": " + std::strerror(errno);
+      std::filesystem::remove(tmp, ec);
+      return false;
+    }
+  }
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    *why = "cannot move cache file into place: " + ec.message();
+    std::filesystem::remove(tmp, ec);
+    return false;
+  }
+  return true;
+}
+
+std::string PathFor(const std::string& dir, int k, uint64_t samples_hash) {
+  char name[64];
+  std::snprintf(name, sizeof(name), "hierarchy-v%u-k%d-%016llx.eta", kHierarchyCacheVersion, k,
+                static_cast<unsigned long long>(samples_hash));
+  return (std::filesystem::path(dir) / name).string();
+}
+
+}  // namespace
+
+const char* CacheOutcomeName(CacheOutcome outcome) {
+  switch (outcome) {
+    case CacheOutcome::kDisabled: return "disabled";
+    case CacheOutcome::kHit: return "hit";
+    case CacheOutcome::kMissBuilt: return "miss (built and stored)";
+    case CacheOutcome::kInvalidRebuilt: return "invalid (rebuilt and replaced)";
+  }
+  return "?";
+}
+
+std::string DefaultCacheDir() {
+  if (const char* d = std::getenv("ISOSTREAM_CACHE_DIR"); d && *d) return d;
+  if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/isostream";
+  if (const char* home = std::getenv("HOME"); home && *home)
+    return std::string(home) + "/.cache/isostream";
+  return "";
+}
+
+std::string HierarchyCachePath(const std::string& dir, const PaddedSamples& samples) {
+  return PathFor(dir, samples.k, SamplesHash(samples));
+}
+
+absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
+                                                  const HierarchyCacheOptions& cache,
+                                                  const HierarchyBuildOptions& build,
+                                                  CacheOutcome* outcome, std::string* why) {
+  std::string reason;
+  CacheOutcome result = CacheOutcome::kDisabled;
+  if (cache.dir.empty()) {
+    if (outcome) *outcome = result;
+    return BuildHierarchy(std::move(samples), build);
+  }
+  const uint64_t hash = SamplesHash(samples);
+  const std::string path = PathFor(cache.dir, samples.k, hash);
+  std::vector<float> eta;
+  if (ReadCache(path, samples, hash, &eta, &reason)) {
+    if (outcome) *outcome = CacheOutcome::kHit;
+    if (why) *why = "loaded " + path;
+    return AssembleHierarchy(std::move(samples), std::move(eta));
+  }
+  result = std::filesystem::exists(path) ? CacheOutcome::kInvalidRebuilt : CacheOutcome::kMissBuilt;
+  ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built, BuildHierarchy(std::move(samples), build));
+  std::string write_why;
+  if (!WriteCache(path, *built, hash, &write_why)) reason += "; " + write_why;
+  if (outcome) *outcome = result;
+  if (why) *why = reason + " -> " + path;
+  return built;
+}
+
+}  // namespace isostream

@@ -1,0 +1,40 @@
+// On-disk cache of built hierarchies, so a restart does not rebuild.
+//
+// A cache file holds eta for one set of padded samples. It is keyed by a hash of the samples
+// (so any change to the source, the padding or the generator makes the entry stale), carries a
+// format version, and ends with a checksum of the payload. A file that is stale, truncated,
+// from another version or fails its checksum is ignored and replaced by a fresh build;
+// writes go to a temporary file renamed into place, so readers never see half a file.
+#pragma once
+
+#include <string>
+
+#include "server/hierarchy/hierarchy.h"
+
+namespace isostream {
+
+enum class CacheOutcome { kDisabled, kHit, kMissBuilt, kInvalidRebuilt };
+const char* CacheOutcomeName(CacheOutcome outcome);
+
+struct HierarchyCacheOptions {
+  std::string dir;  // empty: no cache
+};
+
+// Default cache directory: $ISOSTREAM_CACHE_DIR, else $XDG_CACHE_HOME/isostream, else
+// $HOME/.cache/isostream.
+std::string DefaultCacheDir();
+
+// Returns the cached hierarchy for these samples, or builds (and stores) it. A cache that
+// cannot be written is not an error: the built hierarchy is returned and `why` says so.
+absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
+                                                  const HierarchyCacheOptions& cache,
+                                                  const HierarchyBuildOptions& build,
+                                                  CacheOutcome* outcome = nullptr,
+                                                  std::string* why = nullptr);
+
+// The path a given sample set is cached under (for tests and `isostream info`).
+std::string HierarchyCachePath(const std::string& dir, const PaddedSamples& samples);
+
+inline constexpr uint32_t kHierarchyCacheVersion = 1;
+
+}  // namespace isostream

@@ -1,0 +1,273 @@
+// Saturated error bounds: monotone, closed under refinement (no hanging nodes for any eps),
+// and a true bound on |f_adaptive - f_full|.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <random>
+#include <set>
+#include <tuple>
+
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
+
+#include "server/hierarchy/hierarchy.h"
+#include "server/hierarchy/refinement_vertex.h"
+#include "tree_walk.h"
+
+namespace isostream {
+namespace {
+
+using testing::AdaptiveLeaves;
+using testing::TetNode;
+using testing::WalkTree;
+
+PaddedSamples MakeSamples(int k, const std::function<float(double, double, double)>& f) {
+  PaddedSamples s;
+  s.k = k;
+  s.n = (1 << k) + 1;
+  s.data_dims = {s.n, s.n, s.n};
+  s.values.resize(static_cast<size_t>(s.n) * s.n * s.n);
+  for (int z = 0; z < s.n; ++z)
+    for (int y = 0; y < s.n; ++y)
+      for (int x = 0; x < s.n; ++x) {
+        const double c = 2.0 / (s.n - 1);
+        s.values[(static_cast<size_t>(z) * s.n + y) * s.n + x] = f(x * c - 1, y * c - 1, z * c - 1);
+      }
+  return s;
+}
+
+struct Volume {
+  const char* name;
+  std::function<float(double, double, double)> f;
+};
+
+std::vector<Volume> TestVolumes() {
+  auto noise = std::make_shared<std::mt19937>(11);
+  return {
+      {"cayley", [](double x, double y, double z) { return float(16 * x * y * z + 4 * (x + y + z) - 1); }},
+      {"sphere", [](double x, double y, double z) { return float(std::sqrt(x * x + y * y + z * z)); }},
+      {"waves", [](double x, double y, double z) { return float(std::sin(5 * x) * std::cos(3 * y) + z * z); }},
+      {"random", [noise](double, double, double) {
+         return std::uniform_real_distribution<float>(-1, 1)(*noise);
+       }},
+  };
+}
+
+HierarchyPtr Build(int k, const Volume& v, int threads = 0) {
+  HierarchyBuildOptions options;
+  options.threads = threads;
+  auto h = BuildHierarchy(MakeSamples(k, v.f), options);
+  EXPECT_TRUE(h.ok()) << h.status();
+  return *h;
+}
+
+double Wavelet(const Hierarchy& h, const TetNode& t) {
+  const glm::ivec3 x = RefinementPoint(t.v);
+  return h.sample(x.x, x.y, x.z) - 0.5 * (double(h.sample(t.v[0].x, t.v[0].y, t.v[0].z)) +
+                                          h.sample(t.v[3].x, t.v[3].y, t.v[3].z));
+}
+
+// eta(x) is exactly |w(x)| + max eta over the refinement vertices of the children of the
+// tetrahedra in x's diamond, as read off the tree itself. This pins the builder's stencils to
+// the bisection tree: a missing child would make eta too small, an extra one too large.
+TEST(Hierarchy, EtaIsAdditiveSaturationOverTreeChildren) {
+  for (const auto& vol : TestVolumes()) {
+    const int k = 4;
+    const HierarchyPtr h = Build(k, vol);
+    std::map<std::tuple<int, int, int>, float> child_max;
+    std::map<std::tuple<int, int, int>, double> wavelet;
+    WalkTree(k, [&](const TetNode& t) {
+      if (t.level >= 3 * k - 1) return t.level < 3 * k;
+      const glm::ivec3 x = RefinementPoint(t.v);
+      auto& m = child_max[{x.x, x.y, x.z}];
+      wavelet[{x.x, x.y, x.z}] = std::abs(Wavelet(*h, t));
+      const ReferenceTet& rt = ReferenceTets::Get()[t.cls];
+      for (int c = 0; c < 2; ++c) {
+        TetVertices cv;
+        ChildVertices(rt, t.v, c, &cv);
+        const glm::ivec3 y = RefinementPoint(cv);
+        m = std::max(m, h->eta(y.x, y.y, y.z));
+      }
+      return true;
+    });
+    size_t checked = 0;
+    for (const auto& [p, m] : child_max) {
+      const double expect = wavelet[p] + m;
+      const float got = h->eta(std::get<0>(p), std::get<1>(p), std::get<2>(p));
+      EXPECT_GE(double(got), expect) << vol.name;
+      EXPECT_LE(double(got), expect * (1 + 1e-6) + 1e-12) << vol.name;
+      ++checked;
+    }
+    EXPECT_GT(checked, 1000u);
+  }
+}
+
+TEST(Hierarchy, SaturationIsMonotoneAlongTheTree) {
+  for (const auto& vol : TestVolumes()) {
+    const int k = 4;
+    const HierarchyPtr h = Build(k, vol);
+    size_t pairs = 0;
+    WalkTree(k, [&](const TetNode& t) {
+      if (t.level >= 3 * k - 1) return t.level < 3 * k;
+      const glm::ivec3 x = RefinementPoint(t.v);
+      const ReferenceTet& rt = ReferenceTets::Get()[t.cls];
+      for (int c = 0; c < 2; ++c) {
+        TetVertices cv;
+        ChildVertices(rt, t.v, c, &cv);
+        const glm::ivec3 y = RefinementPoint(cv);
+        EXPECT_LE(h->eta(y.x, y.y, y.z), h->eta(x.x, x.y, x.z)) << vol.name;
+        ++pairs;
+      }
+      return true;
+    });
+    EXPECT_GT(pairs, 10000u);
+  }
+}
+
+TEST(Hierarchy, SameEtaWithOneAndTwoThreads) {
+  const auto vols = TestVolumes();
+  const HierarchyPtr a = Build(5, vols[2], 1), b = Build(5, vols[2], 2);
+  ASSERT_EQ(a->point_count(), b->point_count());
+  EXPECT_EQ(0, std::memcmp(a->eta(), b->eta(), a->eta_bytes()));
+}
+
+// No hanging node: in the adaptive leaf mesh every face is shared by exactly two leaves, except
+// faces on the domain boundary, which belong to one.
+TEST(Hierarchy, AdaptiveMeshIsConformingForRandomEps) {
+  std::mt19937 rng(5);
+  for (const auto& vol : TestVolumes()) {
+    const int k = 4, size = 1 << k;
+    const HierarchyPtr h = Build(k, vol);
+    const float top = h->eta(size / 2, size / 2, size / 2);
+    std::uniform_real_distribution<double> frac(0, 1);
+    for (int trial = 0; trial < 6; ++trial) {
+      const double eps = top * std::pow(frac(rng), 3.0);
+      const auto leaves = AdaptiveLeaves(*h, eps);
+      std::map<std::array<std::tuple<int, int, int>, 3>, int> faces;
+      for (const auto& t : leaves)
+        for (int skip = 0; skip < 4; ++skip) {
+          std::array<std::tuple<int, int, int>, 3> f;
+          int j = 0;
+          for (int i = 0; i < 4; ++i)
+            if (i != skip) f[j++] = {t.v[i].x, t.v[i].y, t.v[i].z};
+          std::sort(f.begin(), f.end());
+          ++faces[f];
+        }
+      size_t boundary = 0;
+      for (const auto& [f, count] : faces) {
+        bool on_boundary = false;
+        for (int a = 0; a < 3; ++a) {
+          const int c0 = a == 0 ? std::get<0>(f[0]) : a == 1 ? std::get<1>(f[0]) : std::get<2>(f[0]);
+          bool same = true;
+          for (const auto& p : f) {
+            const int c = a == 0 ? std::get<0>(p) : a == 1 ? std::get<1>(p) : std::get<2>(p);
+            same &= c == c0;
+          }
+          on_boundary |= same && (c0 == 0 || c0 == size);
+        }
+        boundary += on_boundary;
+        ASSERT_EQ(count, on_boundary ? 1 : 2) << vol.name << " eps " << eps << ": hanging node";
+      }
+      EXPECT_GT(boundary, 0u);
+    }
+  }
+}
+
+glm::dvec4 Barycentric(const TetVertices& v, const glm::dvec3& p) {
+  const glm::dmat3 e(glm::dvec3(v[1] - v[0]), glm::dvec3(v[2] - v[0]), glm::dvec3(v[3] - v[0]));
+  const glm::dvec3 l = glm::inverse(e) * (p - glm::dvec3(v[0]));
+  return {1 - l.x - l.y - l.z, l.x, l.y, l.z};
+}
+
+// Finds the leaf containing p when descending while `refine` says so.
+TetNode Locate(const glm::dvec3& p, int k, const std::function<bool(const TetNode&)>& refine) {
+  const auto& tables = ReferenceTets::Get();
+  auto inside = [&](const TetVertices& v) {
+    const glm::dvec4 b = Barycentric(v, p);
+    return b.x >= -1e-12 && b.y >= -1e-12 && b.z >= -1e-12 && b.w >= -1e-12;
+  };
+  TetNode t;
+  for (int i = 0; i < kNumInitialTets; ++i) {
+    const TetVertices v = InitialVertices(tables, i, 1 << k);
+    if (inside(v)) {
+      t = TetNode{v, tables.initial_class(i), 0};
+      break;
+    }
+  }
+  while (t.level < 3 * k && refine(t)) {
+    const ReferenceTet& rt = tables[t.cls];
+    TetNode c0{{}, rt.child[0], t.level + 1}, c1{{}, rt.child[1], t.level + 1};
+    ChildVertices(rt, t.v, 0, &c0.v);
+    ChildVertices(rt, t.v, 1, &c1.v);
+    t = inside(c0.v) ? c0 : c1;
+  }
+  return t;
+}
+
+double Interpolate(const Hierarchy& h, const TetNode& t, const glm::dvec3& p) {
+  const glm::dvec4 b = Barycentric(t.v, p);
+  double s = 0;
+  for (int i = 0; i < 4; ++i) s += b[i] * h.sample(t.v[i].x, t.v[i].y, t.v[i].z);
+  return s;
+}
+
+TEST(Hierarchy, EtaBoundsAdaptiveErrorForRandomEps) {
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> frac(0, 1);
+  for (const auto& vol : TestVolumes()) {
+    const int k = 5, size = 1 << k;
+    const HierarchyPtr h = Build(k, vol);
+    const float top = h->eta(size / 2, size / 2, size / 2);
+    for (int trial = 0; trial < 5; ++trial) {
+      const double eps = top * std::pow(frac(rng), 2.0);
+      double worst = 0, worst_eta_gap = 0;
+      for (int s = 0; s < 2000; ++s) {
+        const glm::dvec3 p(size * frac(rng), size * frac(rng), size * frac(rng));
+        const TetNode leaf = Locate(p, k, [&](const TetNode& t) {
+          const glm::ivec3 x = RefinementPoint(t.v);
+          return h->eta(x.x, x.y, x.z) >= eps;
+        });
+        const TetNode finest = Locate(p, k, [](const TetNode&) { return true; });
+        const double err = std::abs(Interpolate(*h, leaf, p) - Interpolate(*h, finest, p));
+        worst = std::max(worst, err);
+        if (leaf.level < 3 * k) {
+          const glm::ivec3 x = RefinementPoint(leaf.v);
+          worst_eta_gap = std::max(worst_eta_gap, err - h->eta(x.x, x.y, x.z));
+        }
+      }
+      EXPECT_LE(worst, eps + 1e-6) << vol.name << " eps " << eps;
+      EXPECT_LE(worst_eta_gap, 1e-6) << vol.name;
+    }
+  }
+}
+
+// The bound is not vacuous: on a curved field a coarse mesh has real error, and eta is not
+// absurdly larger than the error it bounds at the root.
+TEST(Hierarchy, EtaIsTightEnoughToMatter) {
+  const auto vols = TestVolumes();
+  const int k = 5, size = 1 << k;
+  const HierarchyPtr h = Build(k, vols[1]);  // sphere distance
+  EXPECT_GT(h->eta(size / 2, size / 2, size / 2), 0.1f);
+  EXPECT_LT(h->eta(size / 2, size / 2, size / 2), 2.0f);
+  // A linear field is represented exactly at every level: eta is zero everywhere.
+  const HierarchyPtr lin = Build(k, {"linear", [](double x, double y, double z) {
+                                       return float(0.25 * x - 0.5 * y + 0.125 * z);
+                                     }});
+  for (size_t i = 0; i < lin->point_count(); ++i) ASSERT_EQ(lin->eta()[i], 0.0f);
+}
+
+TEST(Hierarchy, RejectsNonFiniteSamplesAndBadShapes) {
+  PaddedSamples s = MakeSamples(2, [](double, double, double) { return 0.0f; });
+  s.values[7] = std::nanf("");
+  EXPECT_EQ(BuildHierarchy(std::move(s)).status().code(), absl::StatusCode::kInvalidArgument);
+  PaddedSamples bad;
+  bad.k = 2;
+  bad.n = 4;  // not 2^k + 1
+  bad.values.resize(64);
+  EXPECT_EQ(BuildHierarchy(std::move(bad)).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace isostream
