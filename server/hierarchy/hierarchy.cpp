@@ -50,6 +50,7 @@ class HierarchyBuilder {
 
   void Run(const HierarchyBuildOptions& options) {
     const size_t total = hier_.samples_.size();
+    hier_.eta_.assign(total, 0.0f);  // corners stay 0: they refine nothing
     size_t done = 0;
     for (int h = 0; h < k_; ++h) {
       for (DiamondKind kind : {DiamondKind::kEdge, DiamondKind::kFace, DiamondKind::kCube}) {
@@ -164,16 +165,12 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options) {
   for (float v : samples.values)
     if (!std::isfinite(v)) return absl::InvalidArgumentError("hierarchy: non-finite sample");
-  const size_t count = samples.values.size();
   ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built,
                              AssembleHierarchy(std::move(samples), std::vector<float>()));
   auto* h = const_cast<Hierarchy*>(built.get());
   HierarchyBuilder builder(h);
   tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
-  arena.execute([&] {
-    h->eta_.assign(count, 0.0f);  // corners stay 0: they refine nothing
-    builder.Run(options);
-  });
+  arena.execute([&] { builder.Run(options); });
   return built;
 }
 

@@ -17,7 +17,7 @@
 #include <memory>
 #include <vector>
 
-#include "server/volume/padding.h"
+#include "server/volume/padded_samples.h"
 #include "shared/status.h"
 
 namespace isostream {

@@ -11,24 +11,12 @@
 #pragma once
 
 #include <array>
-#include <cstdint>
-#include <vector>
 
+#include "server/volume/padded_samples.h"
 #include "server/volume/volume.h"
 #include "shared/status.h"
 
 namespace isostream {
-
-struct PaddedSamples {
-  int k = 0;  // cube has n = 2^k + 1 samples per axis
-  int n = 0;
-  std::array<int, 3> data_dims{0, 0, 0};  // the data box is [0, data_dims - 1] in cube points
-  std::vector<float> values;              // n^3, index (z * n + y) * n + x
-
-  float at(int x, int y, int z) const {
-    return values[(static_cast<size_t>(z) * n + y) * n + x];
-  }
-};
 
 // Smallest k with 2^k + 1 >= max(dims). Dims must be >= 2.
 int HierarchyLevelFor(const std::array<int, 3>& dims);

@@ -96,7 +96,9 @@ TEST(BisectionTree, NodesMatchGeometryAndLongestEdgeBisection) {
     const int ref = len2(t.v[3] - t.v[0]);
     for (int i = 0; i < 4; ++i)
       for (int j = i + 1; j < 4; ++j)
-        if (!(i == 0 && j == 3)) EXPECT_LT(len2(t.v[j] - t.v[i]), ref);
+        if (!(i == 0 && j == 3)) {
+          EXPECT_LT(len2(t.v[j] - t.v[i]), ref);
+        }
     // Volume is 1/6 of the cube cell at the level, halved per level.
     const glm::dmat3 e(glm::dvec3(t.v[1] - t.v[0]), glm::dvec3(t.v[2] - t.v[0]),
                        glm::dvec3(t.v[3] - t.v[0]));
@@ -245,7 +247,11 @@ TEST(ReferenceTets, InitialOrderIsPaintersOrderAlongRays) {
         continue;
       }
       const double t = -num / den;
-      if (den > 0) lo = std::max(lo, t); else hi = std::min(hi, t);
+      if (den > 0) {
+        lo = std::max(lo, t);
+      } else {
+        hi = std::min(hi, t);
+      }
     }
     *t0 = lo;
     return hi > lo + 1e-9;

@@ -1,0 +1,119 @@
+// The hierarchy cache: hits return the same eta; stale, corrupt, truncated and foreign files
+// are detected and rebuilt; an unwritable directory costs only the cache.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "server/hierarchy/hierarchy_cache.h"
+
+namespace isostream {
+namespace {
+
+namespace fs = std::filesystem;
+
+PaddedSamples Samples(int k, float phase) {
+  PaddedSamples s;
+  s.k = k;
+  s.n = (1 << k) + 1;
+  s.data_dims = {s.n, s.n, s.n};
+  s.values.resize(size_t(s.n) * s.n * s.n);
+  for (size_t i = 0; i < s.values.size(); ++i) s.values[i] = std::sin(0.37f * i + phase);
+  return s;
+}
+
+class HierarchyCacheTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::path(::testing::TempDir()) /
+           ("isostream-cache-" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
+            "-" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    cache_.dir = dir_.string();
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  HierarchyPtr Get(PaddedSamples s, CacheOutcome* outcome) {
+    auto h = LoadOrBuildHierarchy(std::move(s), cache_, {}, outcome);
+    EXPECT_TRUE(h.ok()) << h.status();
+    return *h;
+  }
+
+  fs::path dir_;
+  HierarchyCacheOptions cache_;
+};
+
+TEST_F(HierarchyCacheTest, MissThenHitWithIdenticalEta) {
+  CacheOutcome first, second;
+  const HierarchyPtr a = Get(Samples(4, 0), &first);
+  const HierarchyPtr b = Get(Samples(4, 0), &second);
+  EXPECT_EQ(first, CacheOutcome::kMissBuilt);
+  EXPECT_EQ(second, CacheOutcome::kHit);
+  ASSERT_EQ(a->point_count(), b->point_count());
+  EXPECT_EQ(0, std::memcmp(a->eta(), b->eta(), a->eta_bytes()));
+  EXPECT_EQ(0, std::memcmp(a->samples(), b->samples(), a->point_count() * sizeof(float)));
+}
+
+TEST_F(HierarchyCacheTest, ChangedSamplesAreNotServedFromCache) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);
+  const HierarchyPtr b = Get(Samples(4, 1), &outcome);
+  EXPECT_NE(outcome, CacheOutcome::kHit);
+  auto fresh = BuildHierarchy(Samples(4, 1));
+  ASSERT_TRUE(fresh.ok());
+  EXPECT_EQ(0, std::memcmp((*fresh)->eta(), b->eta(), b->eta_bytes()));
+}
+
+void Corrupt(const std::string& path, long offset_from_end, bool truncate) {
+  if (truncate) {
+    fs::resize_file(path, fs::file_size(path) - offset_from_end);
+    return;
+  }
+  std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+  f.seekp(-offset_from_end, std::ios::end);
+  char c = 0x5a;
+  f.write(&c, 1);
+}
+
+TEST_F(HierarchyCacheTest, CorruptTruncatedAndForeignFilesAreRebuilt) {
+  const std::string path = HierarchyCachePath(cache_.dir, Samples(4, 0));
+  auto expect = BuildHierarchy(Samples(4, 0));
+  ASSERT_TRUE(expect.ok());
+  for (int variant = 0; variant < 4; ++variant) {
+    CacheOutcome outcome;
+    Get(Samples(4, 0), &outcome);  // make sure a good file exists
+    ASSERT_TRUE(fs::exists(path));
+    if (variant == 0) Corrupt(path, 17, false);  // payload byte: checksum fails
+    if (variant == 1) Corrupt(path, 100, true);  // truncated payload
+    if (variant == 2) {                          // another format version
+      std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+      f.seekp(8);
+      const uint32_t v = kHierarchyCacheVersion + 7;
+      f.write(reinterpret_cast<const char*>(&v), 4);
+    }
+    if (variant == 3) {  // not a cache file at all
+      std::ofstream(path, std::ios::trunc) << "hello";
+    }
+    const HierarchyPtr h = Get(Samples(4, 0), &outcome);
+    EXPECT_EQ(outcome, CacheOutcome::kInvalidRebuilt) << "variant " << variant;
+    EXPECT_EQ(0, std::memcmp((*expect)->eta(), h->eta(), h->eta_bytes())) << "variant " << variant;
+    Get(Samples(4, 0), &outcome);
+    EXPECT_EQ(outcome, CacheOutcome::kHit) << "replaced file is good again, variant " << variant;
+  }
+}
+
+TEST_F(HierarchyCacheTest, UnwritableDirectoryStillBuilds) {
+  fs::create_directories(dir_);
+  std::ofstream(dir_ / "file") << "x";
+  cache_.dir = (dir_ / "file" / "sub").string();  // a path under a regular file
+  CacheOutcome outcome;
+  std::string why;
+  auto h = LoadOrBuildHierarchy(Samples(3, 0), cache_, {}, &outcome, &why);
+  ASSERT_TRUE(h.ok());
+  EXPECT_NE(why.find("cannot"), std::string::npos) << why;
+}
+
+}  // namespace
+}  // namespace isostream
