@@ -6,9 +6,9 @@
 #include <absl/status/status.h>
 #include <absl/status/statusor.h>
 
-#define ISOSTREAM_RETURN_IF_ERROR(expr)            \
-  do {                                             \
-    ::absl::Status isostream_status_ = (expr);     \
+#define ISOSTREAM_RETURN_IF_ERROR(expr)                    \
+  do {                                                     \
+    ::absl::Status isostream_status_ = (expr);             \
     if (!isostream_status_.ok()) return isostream_status_; \
   } while (0)
 

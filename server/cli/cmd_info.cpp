@@ -69,12 +69,13 @@ int RunInfo(const InfoArgs& args) {
   const double voxels = double(v.voxel_count());
   const int threads = args.threads > 0 ? args.threads : int(std::thread::hardware_concurrency());
   std::printf("volume        %s\n", v.name.c_str());
-  std::printf("dims          %d x %d x %d  (%.0f samples)\n", v.dims[0], v.dims[1], v.dims[2], voxels);
+  std::printf("dims          %d x %d x %d  (%.0f samples)\n", v.dims[0], v.dims[1], v.dims[2],
+              voxels);
   std::printf("spacing       %g %g %g\n", v.spacing[0], v.spacing[1], v.spacing[2]);
   std::printf("origin        %g %g %g\n", v.origin[0], v.origin[1], v.origin[2]);
   std::printf("value range   [%g, %g]\n", v.min_value, v.max_value);
-  std::printf("hierarchy     cube %d^3 (k = %d), %d bisection levels, %zu refinement vertices\n", n, k,
-              3 * k, h.point_count() - 8);
+  std::printf("hierarchy     cube %d^3 (k = %d), %d bisection levels, %zu refinement vertices\n", n,
+              k, 3 * k, h.point_count() - 8);
   std::printf("eta (root)    %g  (error bound of the 6 initial tetrahedra, data units)\n",
               h.eta(n / 2, n / 2, n / 2));
   std::printf("memory        eta %.1f MiB (%.2f B/voxel of the padded cube), samples %.1f MiB\n",
@@ -96,10 +97,12 @@ CLI::App* AddInfoCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--volume", args->volume,
                   "generator (cayley:N, buckyball:N, sphere:N, shells:N, noise:N[:SEED]) or file")
       ->required();
-  cmd->add_option("--threads", args->threads, "worker threads (0: all cores)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--threads", args->threads, "worker threads (0: all cores)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--cache-dir", args->cache_dir, "hierarchy cache directory");
   cmd->add_flag("--no-cache", args->no_cache, "always rebuild, store nothing");
-  cmd->add_option("--max-dim", args->max_dim, "largest accepted samples per axis")->check(CLI::Range(2, 4097));
+  cmd->add_option("--max-dim", args->max_dim, "largest accepted samples per axis")
+      ->check(CLI::Range(2, 4097));
   cmd->callback([args, exit_code] { *exit_code = RunInfo(*args); });
   return cmd;
 }

@@ -1,7 +1,6 @@
 // `isostream tets --json`: the reference tetrahedra as computed at start-up, for inspection.
-#include <nlohmann/json.hpp>
-
 #include <iostream>
+#include <nlohmann/json.hpp>
 
 #include "server/cli/commands.h"
 #include "server/hierarchy/reference_tets.h"

@@ -4,7 +4,6 @@
 #pragma once
 
 #include <array>
-
 #include <glm/vec3.hpp>
 
 #include "server/hierarchy/reference_tets.h"

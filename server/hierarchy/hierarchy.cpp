@@ -67,57 +67,85 @@ class HierarchyBuilder {
  private:
   // One sub-lattice: points of scale h whose odd axes are `mask`. Returns the point count.
   size_t Pass(int h, int mask, DiamondKind kind) {
+    switch (mask) {
+      case 1:
+        return PassT<1>(h, kind);
+      case 2:
+        return PassT<2>(h, kind);
+      case 3:
+        return PassT<3>(h, kind);
+      case 4:
+        return PassT<4>(h, kind);
+      case 5:
+        return PassT<5>(h, kind);
+      case 6:
+        return PassT<6>(h, kind);
+      default:
+        return PassT<7>(h, kind);
+    }
+  }
+
+  // Specialised per odd-axis mask so the inner loop is a fixed stencil over plain arrays.
+  // Along an odd axis the sign of the refinement edge alternates with the lattice index
+  // (coordinates u, 3u, 5u, ... are 1, 3, 1, ... mod 4 in units of u).
+  template <int kMask>
+  size_t PassT(int h, DiamondKind kind) {
+    constexpr bool kOdd[3] = {(kMask & 1) != 0, (kMask & 2) != 0, (kMask & 4) != 0};
     const int u = 1 << h, step = 2 * u;
     int start[3], count[3];
     for (int a = 0; a < 3; ++a) {
-      const bool odd = (mask >> a) & 1;
-      start[a] = odd ? u : 0;
-      count[a] = odd ? (last_ >> (h + 1)) : (last_ >> (h + 1)) + 1;
+      start[a] = kOdd[a] ? u : 0;
+      count[a] = kOdd[a] ? (last_ >> (h + 1)) : (last_ >> (h + 1)) + 1;
     }
     const float* f = hier_.samples_.data();
     float* eta = hier_.eta_.data();
-    const ptrdiff_t stride[3] = {1, n_, static_cast<ptrdiff_t>(n_) * n_};
+    const ptrdiff_t sy = n_, sz = static_cast<ptrdiff_t>(n_) * n_;
+    const ptrdiff_t stride[3] = {1, sy, sz};
 
-    // Refinement-edge offsets for the odd axes depend on each coordinate's residue mod 4u;
-    // they are resolved per point below. Child offsets are fixed per pass.
+    // Children that need no bounds check: cube and face centres only have children inside
+    // their own cell. Edge centres (h > 0) have 8 diagonal children, some of which fall outside
+    // the domain when the edge lies on the boundary; those points take the checked path.
     ptrdiff_t child[8];
     int child_count = 0;
-    if (kind == DiamondKind::kCube) {
-      for (int a = 0; a < 3; ++a) {
-        child[child_count++] = u * stride[a];
-        child[child_count++] = -u * stride[a];
-      }
-    } else if (kind == DiamondKind::kFace) {
+    if (kind == DiamondKind::kCube || kind == DiamondKind::kFace) {
       for (int a = 0; a < 3; ++a)
-        if ((mask >> a) & 1) {
+        if (kind == DiamondKind::kCube || kOdd[a]) {
           child[child_count++] = u * stride[a];
           child[child_count++] = -u * stride[a];
         }
+    } else if (h > 0) {
+      const int half = u / 2;
+      for (int s = 0; s < 8; ++s)
+        child[child_count++] = ((s & 1) ? half : -half) + ((s & 2) ? half : -half) * sy +
+                               ((s & 4) ? half : -half) * sz;
     }
+    const bool edge_children = kind == DiamondKind::kEdge && h > 0;
 
-    tbb::parallel_for(tbb::blocked_range<int>(0, count[2]), [&](const tbb::blocked_range<int>& r) {
-      for (int iz = r.begin(); iz != r.end(); ++iz) {
-        const int z = start[2] + iz * step;
-        for (int iy = 0; iy < count[1]; ++iy) {
-          const int y = start[1] + iy * step;
-          for (int ix = 0; ix < count[0]; ++ix) {
-            const int x = start[0] + ix * step;
-            const int c[3] = {x, y, z};
-            const ptrdiff_t p = x + y * stride[1] + z * stride[2];
-            // Refinement edge: +-u along every odd axis, ends chosen per EvenEndSign.
-            ptrdiff_t edge = 0;
-            for (int a = 0; a < 3; ++a)
-              if ((mask >> a) & 1) edge += EvenEndSign(c[a], h) * u * stride[a];
-            const double w = static_cast<double>(f[p]) -
-                             0.5 * (static_cast<double>(f[p + edge]) + f[p - edge]);
-            float worst = 0.0f;
-            if (kind == DiamondKind::kEdge) {
-              if (h > 0) worst = EdgeChildren(c, h, p, eta, stride);
-            } else {
-              for (int i = 0; i < child_count; ++i) worst = std::max(worst, eta[p + child[i]]);
-            }
-            eta[p] = RoundUp(std::fabs(w) + worst);
+    const int rows = count[1] * count[2];
+    tbb::parallel_for(tbb::blocked_range<int>(0, rows, 16), [&](const tbb::blocked_range<int>& r) {
+      for (int row = r.begin(); row != r.end(); ++row) {
+        const int iy = row % count[1], iz = row / count[1];
+        const int y = start[1] + iy * step, z = start[2] + iz * step;
+        ptrdiff_t edge_yz = 0;
+        if (kOdd[1]) edge_yz += EvenEndSign(y, h) * u * sy;
+        if (kOdd[2]) edge_yz += EvenEndSign(z, h) * u * sz;
+        const bool row_on_boundary = edge_children && ((!kOdd[1] && (y == 0 || y == last_)) ||
+                                                       (!kOdd[2] && (z == 0 || z == last_)));
+        ptrdiff_t p = start[0] + y * sy + z * sz;
+        for (int ix = 0; ix < count[0]; ++ix, p += step) {
+          const ptrdiff_t e = kOdd[0] ? edge_yz + ((ix & 1) ? u : -u) : edge_yz;
+          const double w =
+              static_cast<double>(f[p]) - 0.5 * (static_cast<double>(f[p + e]) + f[p - e]);
+          float worst = 0.0f;
+          const bool checked =
+              row_on_boundary || (edge_children && !kOdd[0] && (ix == 0 || ix == count[0] - 1));
+          if (checked) {
+            const int c[3] = {start[0] + ix * step, y, z};
+            worst = EdgeChildren(c, h, p, eta, stride);
+          } else {
+            for (int i = 0; i < child_count; ++i) worst = std::max(worst, eta[p + child[i]]);
           }
+          eta[p] = RoundUp(std::fabs(w) + worst);
         }
       }
     });

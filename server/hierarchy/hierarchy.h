@@ -28,9 +28,7 @@ class Hierarchy {
   int n() const { return n_; }  // points per axis, 2^k + 1
   const std::array<int, 3>& data_dims() const { return data_dims_; }
 
-  size_t index(int x, int y, int z) const {
-    return (static_cast<size_t>(z) * n_ + y) * n_ + x;
-  }
+  size_t index(int x, int y, int z) const { return (static_cast<size_t>(z) * n_ + y) * n_ + x; }
   const float* samples() const { return samples_.data(); }
   const float* eta() const { return eta_.data(); }
   float sample(int x, int y, int z) const { return samples_[index(x, y, z)]; }
@@ -43,8 +41,8 @@ class Hierarchy {
 
  private:
   friend class HierarchyBuilder;
-  friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(
-      PaddedSamples samples, std::vector<float> eta);
+  friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(PaddedSamples samples,
+                                                                            std::vector<float> eta);
   int k_ = 0;
   int n_ = 0;
   std::array<int, 3> data_dims_{0, 0, 0};

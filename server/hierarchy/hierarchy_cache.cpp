@@ -1,5 +1,6 @@
 #include "server/hierarchy/hierarchy_cache.h"
 
+#include <unistd.h>
 #include <xxhash.h>
 
 #include <cerrno>
@@ -8,8 +9,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-
-#include <unistd.h>
 
 namespace isostream {
 namespace {
@@ -96,7 +95,8 @@ bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples
     h.eta_count = hier.point_count();
     h.eta_hash = XXH3_64bits(hier.eta(), hier.eta_bytes());
     out.write(reinterpret_cast<const char*>(&h), sizeof(h));
-    out.write(reinterpret_cast<const char*>(hier.eta()), static_cast<std::streamsize>(hier.eta_bytes()));
+    out.write(reinterpret_cast<const char*>(hier.eta()),
+              static_cast<std::streamsize>(hier.eta_bytes()));
     if (!out.flush()) {
       *why = "cannot write cache file " + tmp + ": " + std::strerror(errno);
       std::filesystem::remove(tmp, ec);
@@ -123,10 +123,14 @@ std::string PathFor(const std::string& dir, int k, uint64_t samples_hash) {
 
 const char* CacheOutcomeName(CacheOutcome outcome) {
   switch (outcome) {
-    case CacheOutcome::kDisabled: return "disabled";
-    case CacheOutcome::kHit: return "hit";
-    case CacheOutcome::kMissBuilt: return "miss (built and stored)";
-    case CacheOutcome::kInvalidRebuilt: return "invalid (rebuilt and replaced)";
+    case CacheOutcome::kDisabled:
+      return "disabled";
+    case CacheOutcome::kHit:
+      return "hit";
+    case CacheOutcome::kMissBuilt:
+      return "miss (built and stored)";
+    case CacheOutcome::kInvalidRebuilt:
+      return "invalid (rebuilt and replaced)";
   }
   return "?";
 }

@@ -8,12 +8,11 @@
 
 #include <algorithm>
 #include <cstdlib>
-#include <map>
-#include <stdexcept>
-
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
+#include <map>
+#include <stdexcept>
 
 namespace isostream {
 namespace {
@@ -149,8 +148,8 @@ ReferenceTets::ReferenceTets() {
     std::array<glm::ivec3, 5> points;
     for (int i = 0; i < 4; ++i) points[i] = tets_[c].vertex[i] * 2;
     points[kRefinementPoint] = (points[0] + points[3]) / 2;
-    const std::array<std::array<int, 4>, 2> members = {{{0, 1, 2, kRefinementPoint},
-                                                        {kRefinementPoint, 1, 2, 3}}};
+    const std::array<std::array<int, 4>, 2> members = {
+        {{0, 1, 2, kRefinementPoint}, {kRefinementPoint, 1, 2, 3}}};
     for (int k = 0; k < 2; ++k) {
       Verts child;
       for (int i = 0; i < 4; ++i) child[i] = points[members[k][i]];
@@ -194,7 +193,8 @@ ReferenceTets::ReferenceTets() {
         for (const auto& q : initial_vertices_[b])
           if (p == q) shared.push_back(p);
       if (shared.size() != 3) continue;
-      glm::dvec3 n = glm::cross(glm::dvec3(shared[1] - shared[0]), glm::dvec3(shared[2] - shared[0]));
+      glm::dvec3 n =
+          glm::cross(glm::dvec3(shared[1] - shared[0]), glm::dvec3(shared[2] - shared[0]));
       n = glm::normalize(n);
       bool known = false;
       for (const auto& m : planes) known |= std::abs(std::abs(glm::dot(m, n)) - 1.0) < 1e-12;

@@ -9,9 +9,8 @@
 
 #include <array>
 #include <cstdint>
-#include <vector>
-
 #include <glm/vec3.hpp>
+#include <vector>
 
 namespace isostream {
 

@@ -21,8 +21,8 @@ namespace isostream {
 enum class DiamondKind : uint8_t { kCube = 0, kFace = 1, kEdge = 2 };  // == level mod 3
 
 struct RefinementVertex {
-  int h = 0;          // the diamond's cells have side 2^(h+1)
-  int odd_mask = 0;   // bit a set: coordinate a is an odd multiple of 2^h
+  int h = 0;         // the diamond's cells have side 2^(h+1)
+  int odd_mask = 0;  // bit a set: coordinate a is an odd multiple of 2^h
   DiamondKind kind = DiamondKind::kCube;
 };
 

@@ -1,13 +1,13 @@
 // The hierarchy cache: hits return the same eta; stale, corrupt, truncated and foreign files
 // are detected and rebuilt; an unwritable directory costs only the cache.
+#include "server/hierarchy/hierarchy_cache.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-
-#include "server/hierarchy/hierarchy_cache.h"
 
 namespace isostream {
 namespace {

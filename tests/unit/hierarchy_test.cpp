@@ -1,18 +1,18 @@
 // Saturated error bounds: monotone, closed under refinement (no hanging nodes for any eps),
 // and a true bound on |f_adaptive - f_full|.
+#include "server/hierarchy/hierarchy.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
 #include <map>
 #include <random>
 #include <set>
 #include <tuple>
 
-#include <glm/geometric.hpp>
-#include <glm/mat3x3.hpp>
-#include <glm/matrix.hpp>
-
-#include "server/hierarchy/hierarchy.h"
 #include "server/hierarchy/refinement_vertex.h"
 #include "tree_walk.h"
 
@@ -46,12 +46,14 @@ struct Volume {
 std::vector<Volume> TestVolumes() {
   auto noise = std::make_shared<std::mt19937>(11);
   return {
-      {"cayley", [](double x, double y, double z) { return float(16 * x * y * z + 4 * (x + y + z) - 1); }},
-      {"sphere", [](double x, double y, double z) { return float(std::sqrt(x * x + y * y + z * z)); }},
-      {"waves", [](double x, double y, double z) { return float(std::sin(5 * x) * std::cos(3 * y) + z * z); }},
-      {"random", [noise](double, double, double) {
-         return std::uniform_real_distribution<float>(-1, 1)(*noise);
-       }},
+      {"cayley",
+       [](double x, double y, double z) { return float(16 * x * y * z + 4 * (x + y + z) - 1); }},
+      {"sphere",
+       [](double x, double y, double z) { return float(std::sqrt(x * x + y * y + z * z)); }},
+      {"waves", [](double x, double y,
+                   double z) { return float(std::sin(5 * x) * std::cos(3 * y) + z * z); }},
+      {"random", [noise](double, double,
+                         double) { return std::uniform_real_distribution<float>(-1, 1)(*noise); }},
   };
 }
 
@@ -159,7 +161,9 @@ TEST(Hierarchy, AdaptiveMeshIsConformingForRandomEps) {
       for (const auto& [f, count] : faces) {
         bool on_boundary = false;
         for (int a = 0; a < 3; ++a) {
-          const int c0 = a == 0 ? std::get<0>(f[0]) : a == 1 ? std::get<1>(f[0]) : std::get<2>(f[0]);
+          const int c0 = a == 0   ? std::get<0>(f[0])
+                         : a == 1 ? std::get<1>(f[0])
+                                  : std::get<2>(f[0]);
           bool same = true;
           for (const auto& p : f) {
             const int c = a == 0 ? std::get<0>(p) : a == 1 ? std::get<1>(p) : std::get<2>(p);

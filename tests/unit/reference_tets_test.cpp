@@ -2,14 +2,13 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
 #include <map>
 #include <random>
 #include <set>
 #include <tuple>
-
-#include <glm/geometric.hpp>
-#include <glm/mat3x3.hpp>
-#include <glm/matrix.hpp>
 
 #include "server/hierarchy/refinement_vertex.h"
 #include "tree_walk.h"
@@ -62,10 +61,12 @@ TEST(ReferenceTets, SeparatingPlanesAreTheNineMirrorPlanesAndSeparate) {
         break;
       }
     const glm::dvec3 scaled = n / std::max({std::abs(n.x), std::abs(n.y), std::abs(n.z)});
-    directions.insert({static_cast<int>(std::lround(scaled.x)), static_cast<int>(std::lround(scaled.y)),
+    directions.insert({static_cast<int>(std::lround(scaled.x)),
+                       static_cast<int>(std::lround(scaled.y)),
                        static_cast<int>(std::lround(scaled.z))});
     // Components are 0 or +-1 after scaling: axis planes or face-diagonal planes.
-    for (int a = 0; a < 3; ++a) EXPECT_NEAR(std::abs(scaled[a]), std::round(std::abs(scaled[a])), 1e-9);
+    for (int a = 0; a < 3; ++a)
+      EXPECT_NEAR(std::abs(scaled[a]), std::round(std::abs(scaled[a])), 1e-9);
     // Strict separation: vertex 0 (child 0 only) in front, vertex 3 (child 1 only) behind.
     const glm::dvec3 mid = (glm::dvec3(t.vertex[0]) + glm::dvec3(t.vertex[3])) * 0.5;
     EXPECT_GT(glm::dot(t.plane_normal, glm::dvec3(t.vertex[0]) - mid), 0.1);
@@ -140,7 +141,7 @@ TEST(BisectionTree, MaubachTaggedRuleGivesTheSameTetrahedra) {
       const int t = s.tag;
       const glm::ivec3 z = (s.x[0] + s.x[t]) / 2;
       Simplex a{s.x, t > 1 ? t - 1 : 3}, b{{}, t > 1 ? t - 1 : 3};
-      a.x[t] = z;  // (x0, ..., x_{t-1}, z, x_{t+1}, ...)
+      a.x[t] = z;                                       // (x0, ..., x_{t-1}, z, x_{t+1}, ...)
       for (int i = 0; i < t; ++i) b.x[i] = s.x[i + 1];  // (x1, ..., x_t, z, x_{t+1}, ...)
       b.x[t] = z;
       for (int i = t + 1; i < 4; ++i) b.x[i] = s.x[i];
@@ -168,7 +169,8 @@ TEST(BisectionTree, RefinementVerticesAreGridPointsOfExactlyOneLevel) {
     glm::ivec3 e(0);
     for (int a = 0; a < 3; ++a)
       if ((rv.odd_mask >> a) & 1) e[a] = EvenEndSign(x[a], rv.h) * (1 << rv.h);
-    EXPECT_EQ(std::set<PointKey>({Key(t.v[0]), Key(t.v[3])}), std::set<PointKey>({Key(x + e), Key(x - e)}));
+    EXPECT_EQ(std::set<PointKey>({Key(t.v[0]), Key(t.v[3])}),
+              std::set<PointKey>({Key(x + e), Key(x - e)}));
     return true;
   });
   int corners = 0;
