@@ -1,0 +1,107 @@
+#include "server/volume/padding.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cstring>
+#include <exception>
+#include <new>
+#include <string>
+
+#include "server/volume/grid_blocks.h"
+
+namespace isostream {
+namespace {
+
+// 2^12 + 1 = 4097 samples per axis is 275 GB of floats: far past any machine this runs on, so a
+// larger k can only come from a bug or a hostile input.
+constexpr int kMaxHierarchyLevel = 12;
+// Leaf buffers are z fastest: consecutive x are a plane of the leaf apart.
+constexpr int kLeafXStride = FloatLeaf::DIM * FloatLeaf::DIM;
+
+}  // namespace
+
+int HierarchyLevelFor(const std::array<int, 3>& dims) {
+  const int64_t largest = std::max({dims[0], dims[1], dims[2]});
+  int k = 0;
+  while ((int64_t{1} << k) + 1 < largest) ++k;
+  return k;
+}
+
+absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume) {
+  const std::string where = "padding '" + volume.name + "'";
+  const std::array<int, 3>& dims = volume.dims;
+  if (volume.grid == nullptr) return absl::InvalidArgumentError(where + ": volume has no grid");
+  if (std::min({dims[0], dims[1], dims[2]}) < 2) {
+    return absl::InvalidArgumentError(where + ": dims " + std::to_string(dims[0]) + "x" +
+                                      std::to_string(dims[1]) + "x" + std::to_string(dims[2]) +
+                                      " need at least 2 samples per axis");
+  }
+  const int k = HierarchyLevelFor(dims);
+  if (k > kMaxHierarchyLevel) {
+    return absl::ResourceExhaustedError(where + ": needs a cube of 2^" + std::to_string(k) +
+                                        "+1 samples per axis; the limit is 2^" +
+                                        std::to_string(kMaxHierarchyLevel) + "+1");
+  }
+
+  PaddedSamples out;
+  out.k = k;
+  out.n = (1 << k) + 1;
+  out.data_dims = dims;
+  const int n = out.n;
+  const size_t plane = static_cast<size_t>(n) * n;
+  try {
+    out.values.resize(plane * n);
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError(where + ": cannot allocate " + std::to_string(n) +
+                                        "^3 samples");
+  }
+  float* cube = out.values.data();
+
+  // Copy the data box to the cube's origin corner, leaf block by leaf block.
+  const openvdb::Coord lo(volume.index_min[0], volume.index_min[1], volume.index_min[2]);
+  const openvdb::CoordBBox box(lo, lo.offsetBy(dims[0] - 1, dims[1] - 1, dims[2] - 1));
+  ForEachBlock(*volume.grid, box,
+               [&](const openvdb::CoordBBox& block, const float* leaf_values, float value) {
+                 for (int z = block.min().z(); z <= block.max().z(); ++z) {
+                   for (int y = block.min().y(); y <= block.max().y(); ++y) {
+                     float* row = cube + (z - lo.z()) * plane +
+                                  static_cast<size_t>(y - lo.y()) * n + (block.min().x() - lo.x());
+                     const int width = block.max().x() - block.min().x() + 1;
+                     if (leaf_values == nullptr) {
+                       std::fill(row, row + width, value);
+                       continue;
+                     }
+                     const float* src =
+                         leaf_values + LeafOffset(openvdb::Coord(block.min().x(), y, z));
+                     for (int x = 0; x < width; ++x) row[x] = src[x * kLeafXStride];
+                   }
+                 }
+               });
+
+  // Replicate edges: first along x and y inside the data planes, then whole planes along z
+  // (which need the finished plane dims[2] - 1, hence two passes).
+  const int dx = dims[0], dy = dims[1], dz = dims[2];
+  tbb::parallel_for(tbb::blocked_range<int>(0, dz), [&](const tbb::blocked_range<int>& r) {
+    for (int z = r.begin(); z != r.end(); ++z) {
+      float* p = cube + z * plane;
+      for (int y = 0; y < dy; ++y) {
+        float* row = p + static_cast<size_t>(y) * n;
+        std::fill(row + dx, row + n, row[dx - 1]);
+      }
+      const float* last_row = p + static_cast<size_t>(dy - 1) * n;
+      for (int y = dy; y < n; ++y)
+        std::memcpy(p + static_cast<size_t>(y) * n, last_row, n * sizeof(float));
+    }
+  });
+  tbb::parallel_for(tbb::blocked_range<int>(dz, n), [&](const tbb::blocked_range<int>& r) {
+    const float* last_plane = cube + (dz - 1) * plane;
+    for (int z = r.begin(); z != r.end(); ++z) {
+      std::memcpy(cube + z * plane, last_plane, plane * sizeof(float));
+    }
+  });
+  return out;
+}
+
+}  // namespace isostream
