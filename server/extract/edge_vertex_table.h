@@ -1,0 +1,90 @@
+// Edge -> vertex lookup for sharing isosurface vertices between the tetrahedra around an edge
+// (the edge-based idea of Kipfer & Westermann): each edge crossing is computed once per surface.
+//
+// Open addressing with linear probing over one flat array. Clearing is O(1): each slot carries
+// the generation that wrote it, and Reset() starts a new generation. The table grows by
+// rehashing when half full; it never allocates per lookup.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace isostream {
+
+class EdgeVertexTable {
+ public:
+  static constexpr uint32_t kMissing = 0xffffffffu;
+
+  explicit EdgeVertexTable(size_t initial_capacity = 1 << 12) {
+    Allocate(RoundUp(initial_capacity));
+  }
+
+  void Reset() {
+    ++generation_;
+    size_ = 0;
+    if (generation_ == 0) {  // wrapped: stale slots could look current
+      for (auto& s : slots_) s.generation = 0;
+      generation_ = 1;
+    }
+  }
+
+  // Returns the vertex stored for key, or kMissing after reserving the slot for `fresh`
+  // (the caller then creates vertex `fresh`).
+  uint32_t FindOrInsert(uint64_t key, uint32_t fresh) {
+    if (2 * (size_ + 1) > slots_.size()) Grow();
+    size_t i = Hash(key) & mask_;
+    for (;;) {
+      Slot& s = slots_[i];
+      if (s.generation != generation_) {
+        s = Slot{key, fresh, generation_};
+        ++size_;
+        return kMissing;
+      }
+      if (s.key == key) return s.value;
+      i = (i + 1) & mask_;
+    }
+  }
+
+  size_t size() const { return size_; }
+
+ private:
+  struct Slot {
+    uint64_t key;
+    uint32_t value;
+    uint32_t generation;
+  };
+
+  static size_t RoundUp(size_t n) {
+    size_t c = 16;
+    while (c < n) c <<= 1;
+    return c;
+  }
+  static uint64_t Hash(uint64_t k) {  // a 64-bit mix (splitmix64 finaliser constants)
+    k ^= k >> 30;
+    k *= 0xbf58476d1ce4e5b9ull;
+    k ^= k >> 27;
+    k *= 0x94d049bb133111ebull;
+    return k ^ (k >> 31);
+  }
+  void Allocate(size_t capacity) {
+    slots_.assign(capacity, Slot{0, 0, 0});
+    mask_ = capacity - 1;
+    generation_ = 1;
+    size_ = 0;
+  }
+  void Grow() {
+    std::vector<Slot> old;
+    old.swap(slots_);
+    const uint32_t gen = generation_;
+    Allocate(old.size() * 2);
+    for (const Slot& s : old)
+      if (s.generation == gen) FindOrInsert(s.key, s.value);
+  }
+
+  std::vector<Slot> slots_;
+  size_t mask_ = 0;
+  size_t size_ = 0;
+  uint32_t generation_ = 1;
+};
+
+}  // namespace isostream

@@ -1,0 +1,275 @@
+// Drives the traversal (traversal.h): validation, the split into subtrees, parallel
+// extraction, the ordered join, and the eps search for a triangle budget.
+//
+// Parallel output follows the count -> prefix sum -> fill pattern: subtrees are cut from the
+// top of the tree in draw order, extracted independently, then concatenated in that order, so
+// the result is the single-thread result whatever the thread count. Vertices on a subtree's
+// boundary faces are merged by edge key in the join.
+#include "server/extract/extractor.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
+#include <numeric>
+#include <unordered_map>
+
+#include "server/extract/traversal.h"
+
+namespace isostream {
+
+using extract_internal::Context;
+using extract_internal::Decide;
+using extract_internal::Decision;
+using extract_internal::Node;
+using extract_internal::SubtreeMesh;
+using extract_internal::Traverser;
+
+absl::Status ValidateRequest(const ExtractRequest& r) {
+  if (r.isovalues.empty()) return absl::InvalidArgumentError("no isovalue given");
+  if (r.isovalues.size() > size_t(kMaxSurfaces))
+    return absl::InvalidArgumentError("at most " + std::to_string(kMaxSurfaces) +
+                                      " isovalues per request, got " +
+                                      std::to_string(r.isovalues.size()));
+  for (float v : r.isovalues)
+    if (!std::isfinite(v)) return absl::InvalidArgumentError("isovalue is not a finite number");
+  if (r.budget < 0) return absl::InvalidArgumentError("triangle budget must be positive");
+  if (r.budget == 0 && !(r.eps >= 0 && std::isfinite(r.eps)))
+    return absl::InvalidArgumentError("eps must be a finite number >= 0");
+  if (r.threads < 0) return absl::InvalidArgumentError("threads must be >= 0");
+  const glm::dvec3& d = r.view.orthographic ? r.view.direction : r.view.eye;
+  if (!std::isfinite(d.x) || !std::isfinite(d.y) || !std::isfinite(d.z))
+    return absl::InvalidArgumentError("view is not finite");
+  if (r.view.orthographic && glm::dot(d, d) == 0)
+    return absl::InvalidArgumentError("view direction is zero");
+  return absl::OkStatus();
+}
+
+namespace {
+
+double Ms(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since)
+      .count();
+}
+
+Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequest& r,
+                    double eps) {
+  Context c;
+  c.f = h.samples();
+  c.eta = h.eta();
+  c.k = h.k();
+  c.n = h.n();
+  c.sy = h.n();
+  c.sz = ptrdiff_t(h.n()) * h.n();
+  for (int a = 0; a < 3; ++a) c.data_max[a] = h.data_dims()[a] - 1;
+  c.clip = c.data_max.x < c.n - 1 || c.data_max.y < c.n - 1 || c.data_max.z < c.n - 1;
+  std::vector<std::pair<float, int>> sorted;
+  for (size_t i = 0; i < r.isovalues.size(); ++i) sorted.push_back({r.isovalues[i], int(i)});
+  std::sort(sorted.begin(), sorted.end());
+  c.iso_count = 0;
+  for (size_t i = 0; i < sorted.size(); ++i) {
+    if (c.iso_count > 0 && c.iso[c.iso_count - 1] == sorted[i].first) continue;  // duplicate
+    c.iso[c.iso_count] = sorted[i].first;
+    c.iso_surface[c.iso_count++] = uint8_t(sorted[i].second);
+  }
+  c.eps = static_cast<float>(eps);
+  if (double(c.eps) < eps) c.eps = std::nextafter(c.eps, INFINITY);  // stop only if eta < eps
+  c.ordered = r.order == DrawOrder::kBackToFront;
+  c.orthographic = r.view.orthographic;
+  // Affine maps keep planes and sides: order in grid space with the eye mapped there.
+  c.eye = (r.view.eye - xf.origin) / xf.spacing;
+  c.dir = r.view.direction / xf.spacing;
+  c.normals = r.normals;
+  c.xf = xf;
+  c.tables = &ReferenceTets::Get();
+  return c;
+}
+
+// Cuts the top of the tree into subtrees in draw order. Deterministic (independent of the
+// thread count) so the output is too.
+std::vector<Node> SplitIntoSubtrees(const Context& c) {
+  const ReferenceTets& tables = *c.tables;
+  const int size = 1 << c.k;
+  int order[kNumInitialTets];
+  if (c.ordered) {
+    tables.InitialOrder(c.orthographic ? c.dir : c.eye / double(size), c.orthographic, order);
+  } else {
+    std::iota(order, order + kNumInitialTets, 0);
+  }
+  std::vector<Node> items;
+  for (int i : order) {
+    Node t;
+    t.v = InitialVertices(tables, i, size);
+    for (int j = 0; j < 4; ++j) t.f[j] = c.f[c.Index(t.v[j])];
+    const glm::dmat3 e(glm::dvec3(t.v[1] - t.v[0]), glm::dvec3(t.v[2] - t.v[0]),
+                       glm::dvec3(t.v[3] - t.v[0]));
+    const glm::dvec3 df(t.f[1] - t.f[0], t.f[2] - t.f[0], t.f[3] - t.f[0]);
+    t.g = glm::inverse(glm::transpose(e)) * df;  // the only direct solve: the six roots
+    t.cls = tables.initial_class(i);
+    t.level = 0;
+    items.push_back(t);
+  }
+  constexpr size_t kTargetSubtrees = 256;
+  constexpr int kMaxSplitLevel = 15;
+  for (int level = 0; level < kMaxSplitLevel && items.size() < kTargetSubtrees; ++level) {
+    std::vector<Node> next;
+    bool refined = false;
+    for (const Node& t : items) {
+      const Decision d = Decide(c, t);
+      if (d == Decision::kCull) continue;
+      if (d == Decision::kLeaf) {
+        next.push_back(t);
+        continue;
+      }
+      Node kids[2];
+      extract_internal::Bisect(c, t, kids);
+      next.push_back(kids[0]);
+      next.push_back(kids[1]);
+      refined = true;
+    }
+    items.swap(next);
+    if (!refined) break;
+  }
+  return items;
+}
+
+struct Scratch {
+  EdgeVertexTable table{1 << 14};
+};
+
+int64_t CountAt(const Context& c, int64_t limit) {
+  const std::vector<Node> items = SplitIntoSubtrees(c);
+  std::atomic<int64_t> total{0};
+  tbb::parallel_for(size_t(0), items.size(), [&](size_t i) {
+    if (total.load(std::memory_order_relaxed) > limit) return;
+    Traverser<false> t(c, nullptr, nullptr);
+    total += t.Run(items[i], limit);
+  });
+  return total.load();
+}
+
+}  // namespace
+
+absl::StatusOr<int64_t> CountTriangles(const Hierarchy& h, const GridToWorld& xf,
+                                       const ExtractRequest& r, double eps, int64_t limit) {
+  ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
+  const Context c = MakeContext(h, xf, r, eps);
+  tbb::task_arena arena(r.threads > 0 ? r.threads : tbb::task_arena::automatic);
+  return arena.execute([&] { return CountAt(c, limit); });
+}
+
+absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
+                                      const ExtractRequest& r) {
+  ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
+  const auto t_start = std::chrono::steady_clock::now();
+  ExtractResult result;
+  ExtractStats& st = result.stats;
+  tbb::task_arena arena(r.threads > 0 ? r.threads : tbb::task_arena::automatic);
+
+  double eps = r.eps;
+  if (r.budget > 0) {
+    // Triangle count never grows with eps (saturated eta nests the meshes), so bisect on a
+    // log scale between eps = 0 and the root's eta, each probe a count that stops past the
+    // budget. Ends at the smallest probed eps whose count fits.
+    auto t0 = std::chrono::steady_clock::now();
+    const int half = (h.n() - 1) / 2;
+    double hi = double(h.eta(half, half, half)) * 1.0001 + 1e-30;
+    arena.execute([&] {
+      const int64_t at_zero = CountAt(MakeContext(h, xf, r, 0.0), r.budget);
+      ++st.budget_passes;
+      if (at_zero <= r.budget) {
+        eps = 0.0;
+        return;
+      }
+      double lo = hi * 1e-9;
+      for (int i = 0; i < 40 && hi / lo > 1.002; ++i) {
+        const double mid = std::sqrt(lo * hi);
+        const int64_t count = CountAt(MakeContext(h, xf, r, mid), r.budget);
+        ++st.budget_passes;
+        (count <= r.budget ? hi : lo) = mid;
+      }
+      eps = hi;
+    });
+    st.budget_ms = Ms(t0);
+  }
+  st.eps_used = eps;
+  const Context c = MakeContext(h, xf, r, eps);
+
+  auto t0 = std::chrono::steady_clock::now();
+  const std::vector<Node> items = SplitIntoSubtrees(c);
+  st.split_ms = Ms(t0);
+  st.subtrees = int(items.size());
+
+  // Extract every subtree into its own buffers.
+  t0 = std::chrono::steady_clock::now();
+  std::vector<SubtreeMesh> parts(items.size());
+  arena.execute([&] {
+    tbb::enumerable_thread_specific<Scratch> scratch;
+    tbb::parallel_for(size_t(0), items.size(), [&](size_t i) {
+      Traverser<true> t(c, &scratch.local().table, &parts[i]);
+      t.Run(items[i]);
+    });
+  });
+  st.extract_ms = Ms(t0);
+
+  // Join: prefix sums, one allocation, disjoint parallel copies in draw order.
+  t0 = std::chrono::steady_clock::now();
+  std::vector<size_t> vbase(parts.size() + 1, 0), tbase(parts.size() + 1, 0);
+  for (size_t i = 0; i < parts.size(); ++i) {
+    vbase[i + 1] = vbase[i] + parts[i].mesh.vertex_count();
+    tbase[i + 1] = tbase[i] + parts[i].mesh.triangle_count();
+    st.tets_visited += parts[i].visited;
+    st.leaves += parts[i].leaves;
+  }
+  OrderedMesh& m = result.mesh;
+  m.positions.resize(3 * vbase.back());
+  m.normals.resize(3 * vbase.back());
+  m.triangles.resize(3 * tbase.back());
+  m.surface.resize(tbase.back());
+  // Boundary vertices: the first occurrence of an edge key in draw order keeps its id.
+  std::vector<uint32_t> remap;
+  {
+    std::unordered_map<uint64_t, uint32_t> first;
+    for (size_t i = 0; i < parts.size(); ++i)
+      for (const auto& [local, key] : parts[i].boundary) {
+        const uint32_t global = uint32_t(vbase[i] + local);
+        auto [it, inserted] = first.emplace(key, global);
+        if (!inserted) {
+          if (remap.empty()) {
+            remap.resize(vbase.back());
+            std::iota(remap.begin(), remap.end(), 0u);
+          }
+          remap[global] = it->second;
+        }
+      }
+  }
+  arena.execute([&] {
+    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
+      const OrderedMesh& p = parts[i].mesh;
+      std::copy(p.positions.begin(), p.positions.end(), m.positions.begin() + 3 * vbase[i]);
+      std::copy(p.normals.begin(), p.normals.end(), m.normals.begin() + 3 * vbase[i]);
+      std::copy(p.surface.begin(), p.surface.end(), m.surface.begin() + tbase[i]);
+      uint32_t* out = m.triangles.data() + 3 * tbase[i];
+      const uint32_t base = uint32_t(vbase[i]);
+      for (size_t j = 0; j < p.triangles.size(); ++j) {
+        const uint32_t g = p.triangles[j] + base;
+        out[j] = remap.empty() ? g : remap[g];
+      }
+    });
+  });
+  st.join_ms = Ms(t0);
+
+  st.triangles = int64_t(m.triangle_count());
+  st.vertices = int64_t(m.vertex_count());
+  for (uint8_t s : m.surface) ++st.triangles_per_surface[s];
+  st.total_ms = Ms(t_start);
+  return result;
+}
+
+}  // namespace isostream

@@ -1,0 +1,33 @@
+// Adaptive extraction of multiple transparent isosurfaces from the bisection hierarchy, with
+// triangles emitted in back-to-front order for a view (Gerstner §3-§5).
+//
+// Contract: Extract() returns an OrderedMesh whose triangles, drawn first to last, form a
+// valid painter's order for request.view (perspective eye anywhere, inside the volume too, or
+// orthographic direction). The mesh is crack-free for every eps (saturated eta), its field
+// differs from the full-resolution one by less than eps in data units, and the output is the
+// same for any thread count. Cost follows the output: subtrees no isovalue can meet are skipped.
+#pragma once
+
+#include "server/extract/extract_request.h"
+#include "server/hierarchy/hierarchy.h"
+#include "shared/ordered_mesh.h"
+#include "shared/status.h"
+
+namespace isostream {
+
+struct ExtractResult {
+  OrderedMesh mesh;
+  ExtractStats stats;
+};
+
+// The one-call form. `xf` places the hierarchy cube in world space (volume spacing, origin).
+absl::StatusOr<ExtractResult> Extract(const Hierarchy& hierarchy, const GridToWorld& xf,
+                                      const ExtractRequest& request);
+
+// Triangle count at a given eps without building the mesh; stops counting past `limit`.
+// Used by the budget search; exposed for tests and benchmarks.
+absl::StatusOr<int64_t> CountTriangles(const Hierarchy& hierarchy, const GridToWorld& xf,
+                                       const ExtractRequest& request, double eps,
+                                       int64_t limit = INT64_MAX);
+
+}  // namespace isostream

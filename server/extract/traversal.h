@@ -1,0 +1,399 @@
+// The adaptive, view-ordered traversal of the bisection tree (Gerstner §3-§5). Private to
+// server/extract: extractor.cpp drives it over subtrees in parallel.
+//
+// Steps per tetrahedron T (explicit stack, no allocation per node):
+//  1. cull: outside the data box, or no isovalue within [min f - eta, max f + eta] (§3; the
+//     bound is proved in hierarchy.cpp);
+//  2. stop where eta(x_ref) < eps or at the finest level, else bisect: children get their
+//     corner values from the parent plus f(x_ref), and their gradients by the §5 update;
+//  3. order: the child on the far side of the separating plane first (§4.2); the initial six
+//     come from the BSP in ReferenceTets (§4.1);
+//  4. leaf: marching tetrahedra for every isovalue crossing T, components ordered far to near
+//     by |iso - f_T(eye)| (§4.3: parallel planes, so the one farther from the eye in function
+//     value is farther along every ray that crosses both).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+#include <vector>
+
+#include "server/extract/edge_vertex_table.h"
+#include "server/extract/extract_request.h"
+#include "server/hierarchy/bisection.h"
+#include "server/hierarchy/hierarchy.h"
+
+namespace isostream::extract_internal {
+
+struct Node {
+  TetVertices v;
+  float f[4];
+  glm::dvec3 g;  // gradient of the linear interpolant on T, grid units
+  TetClass cls;
+  int level;
+};
+
+// Everything the traversal reads, fixed for one request.
+struct Context {
+  const float* f = nullptr;
+  const float* eta = nullptr;
+  int k = 0, n = 0;
+  ptrdiff_t sy = 0, sz = 0;
+  glm::ivec3 data_max{0};             // data box is [0, data_max]
+  bool clip = false;                  // the data box is smaller than the cube
+  float iso[kMaxSurfaces];            // ascending
+  uint8_t iso_surface[kMaxSurfaces];  // request index of iso[i]
+  int iso_count = 0;
+  float eps = 0;
+  bool ordered = true;
+  bool orthographic = false;
+  glm::dvec3 eye{0.0}, dir{0.0};  // grid space
+  NormalMode normals = NormalMode::kSmooth;
+  GridToWorld xf;
+  const ReferenceTets* tables = nullptr;
+
+  size_t Index(const glm::ivec3& p) const { return p.x + p.y * sy + p.z * sz; }
+};
+
+enum class Decision { kCull, kLeaf, kRefine };
+
+// Lowest sorted-iso index with iso > lo, and one past the highest with iso <= hi.
+inline void IsoRange(const Context& c, float lo, float hi, int* first, int* last) {
+  int a = 0;
+  while (a < c.iso_count && c.iso[a] <= lo) ++a;
+  int b = a;
+  while (b < c.iso_count && c.iso[b] <= hi) ++b;
+  *first = a;
+  *last = b;
+}
+
+inline Decision Decide(const Context& c, const Node& t) {
+  if (c.clip) {
+    for (int a = 0; a < 3; ++a) {
+      const int lo = std::min(std::min(t.v[0][a], t.v[1][a]), std::min(t.v[2][a], t.v[3][a]));
+      if (lo >= c.data_max[a]) return Decision::kCull;
+    }
+  }
+  const float fmin = std::min(std::min(t.f[0], t.f[1]), std::min(t.f[2], t.f[3]));
+  const float fmax = std::max(std::max(t.f[0], t.f[1]), std::max(t.f[2], t.f[3]));
+  int first, last;
+  if (t.level == 3 * c.k) {
+    IsoRange(c, fmin, fmax, &first, &last);  // exact: a crossing needs fmin < iso <= fmax
+    return first < last ? Decision::kLeaf : Decision::kCull;
+  }
+  const float e = c.eta[c.Index(RefinementPoint(t.v))];
+  // Any iso in [fmin - e, fmax + e] may meet f_full inside T.
+  int a = 0;
+  while (a < c.iso_count && c.iso[a] < fmin - e) ++a;
+  if (a == c.iso_count || c.iso[a] > fmax + e) return Decision::kCull;
+  if (e >= c.eps) return Decision::kRefine;
+  IsoRange(c, fmin, fmax, &first, &last);
+  return first < last ? Decision::kLeaf : Decision::kCull;
+}
+
+// Children of t in draw order (first to draw in out[0]).
+inline void Bisect(const Context& c, const Node& t, Node out[2]) {
+  const ReferenceTet& rt = (*c.tables)[t.cls];
+  const glm::ivec3 x = RefinementPoint(t.v);
+  const float fx = c.f[c.Index(x)];
+  const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
+  const double w = double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]));
+  // One normalised unit of the class is half the cube cell of this level.
+  const double unit = double((1 << c.k) >> (t.level / 3)) * 0.5;
+  bool child0_first = true;
+  if (c.ordered) {
+    const double side = c.orthographic ? -glm::dot(rt.plane_normal, c.dir)
+                                       : glm::dot(rt.plane_normal, c.eye - glm::dvec3(x));
+    child0_first = side <= 0;  // eye on child 1's side: child 0 is farther
+  }
+  for (int ch = 0; ch < 2; ++ch) {
+    Node& o = out[child0_first ? ch : 1 - ch];
+    ChildVertices(rt, t.v, ch, &o.v);
+    for (int i = 0; i < 4; ++i) o.f[i] = fp[rt.child_point[ch][i]];
+    o.g = t.g + w * rt.gradient_update[ch] / unit;
+    o.cls = rt.child[ch];
+    o.level = t.level + 1;
+  }
+}
+
+// Output of one subtree: a mesh with local vertex indices, plus the vertices that lie on the
+// subtree root's faces (they may be shared with a neighbouring subtree and are merged later).
+struct SubtreeMesh {
+  OrderedMesh mesh;
+  std::vector<std::pair<uint32_t, uint64_t>> boundary;  // (local vertex, edge key)
+  int64_t visited = 0;
+  int64_t leaves = 0;
+  void clear() {
+    mesh.clear();
+    boundary.clear();
+    visited = leaves = 0;
+  }
+};
+
+// Integer planes of a subtree root's faces, to recognise edges that lie on them.
+struct RootFaces {
+  glm::i64vec3 normal[4];
+  int64_t offset[4];
+  static int64_t Dot(const glm::i64vec3& a, const glm::i64vec3& b) {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+  }
+  explicit RootFaces(const TetVertices& v) {
+    for (int i = 0; i < 4; ++i) {
+      const glm::i64vec3 a(v[(i + 1) % 4]), b(v[(i + 2) % 4]), c(v[(i + 3) % 4]);
+      const glm::i64vec3 u = b - a, w = c - a;
+      normal[i] = {u.y * w.z - u.z * w.y, u.z * w.x - u.x * w.z, u.x * w.y - u.y * w.x};
+      offset[i] = Dot(normal[i], a);
+    }
+  }
+  bool EdgeOnFace(const glm::ivec3& p, const glm::ivec3& q) const {
+    for (int i = 0; i < 4; ++i)
+      if (Dot(normal[i], glm::i64vec3(p)) == offset[i] &&
+          Dot(normal[i], glm::i64vec3(q)) == offset[i])
+        return true;
+    return false;
+  }
+};
+
+// Emits triangles (kEmit) or only counts them, for one subtree.
+template <bool kEmit>
+class Traverser {
+ public:
+  Traverser(const Context& c, EdgeVertexTable* table, SubtreeMesh* out)
+      : c_(c), table_(table), out_(out) {}
+
+  // Returns the triangle count (stops early past `limit` when counting).
+  int64_t Run(const Node& root, int64_t limit = INT64_MAX) {
+    faces_ = RootFaces(root.v);
+    if (kEmit) table_->Reset();
+    int64_t triangles = 0;
+    Node stack[2 * 3 * 16 + 4];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0) {
+      const Node t = stack[--top];
+      if (kEmit) ++out_->visited;
+      switch (Decide(c_, t)) {
+        case Decision::kCull:
+          break;
+        case Decision::kRefine: {
+          Node kids[2];
+          Bisect(c_, t, kids);
+          stack[top++] = kids[1];  // popped second: drawn later
+          stack[top++] = kids[0];
+          break;
+        }
+        case Decision::kLeaf:
+          triangles += Leaf(t);
+          if (!kEmit && triangles > limit) return triangles;
+          break;
+      }
+    }
+    return triangles;
+  }
+
+ private:
+  int Leaf(const Node& t) {
+    const float fmin = std::min(std::min(t.f[0], t.f[1]), std::min(t.f[2], t.f[3]));
+    const float fmax = std::max(std::max(t.f[0], t.f[1]), std::max(t.f[2], t.f[3]));
+    int first, last;
+    IsoRange(c_, fmin, fmax, &first, &last);
+    if (kEmit) ++out_->leaves;
+    int order[kMaxSurfaces], count = 0;
+    if (!c_.ordered) {
+      for (int i = first; i < last; ++i) order[count++] = i;
+    } else if (c_.orthographic) {
+      const bool descending = glm::dot(t.g, c_.dir) > 0;  // f grows away from the eye
+      for (int i = first; i < last; ++i) order[count++] = descending ? last - 1 - (i - first) : i;
+    } else {
+      // Isovalues above f_T(eye), highest first; then those at or below it, lowest first.
+      const double fe = t.f[0] + glm::dot(t.g, c_.eye - glm::dvec3(t.v[0]));
+      int split = first;
+      while (split < last && c_.iso[split] <= fe) ++split;
+      for (int i = last - 1; i >= split; --i) order[count++] = i;
+      for (int i = first; i < split; ++i) order[count++] = i;
+    }
+    int triangles = 0;
+    for (int j = 0; j < count; ++j) triangles += Component(t, order[j]);
+    return triangles;
+  }
+
+  // Marching tetrahedra for sorted isovalue index s.
+  int Component(const Node& t, int s) {
+    const float iso = c_.iso[s];
+    int inside[4], outside[4], ni = 0, no = 0;
+    for (int i = 0; i < 4; ++i) (t.f[i] >= iso ? inside[ni++] : outside[no++]) = i;
+    if (ni == 0 || no == 0) return 0;
+    if (!kEmit) return ni == 2 ? 2 : 1;
+    uint32_t v[4];
+    int nv = 0;
+    if (ni == 1 || no == 1) {
+      const bool lone_inside = ni == 1;
+      const int lone = lone_inside ? inside[0] : outside[0];
+      const int* others = lone_inside ? outside : inside;
+      for (int i = 0; i < 3; ++i) v[nv++] = EdgeVertex(t, lone, others[i], s);
+    } else {  // quad, in cyclic order around the tetrahedron
+      v[nv++] = EdgeVertex(t, inside[0], outside[0], s);
+      v[nv++] = EdgeVertex(t, inside[0], outside[1], s);
+      v[nv++] = EdgeVertex(t, inside[1], outside[1], s);
+      v[nv++] = EdgeVertex(t, inside[1], outside[0], s);
+    }
+    if (nv == 4 && QuadSplitsAlong13(v)) {
+      // Rotate the cycle so the fan's diagonal (v0, v2) is the chosen one.
+      const uint32_t first = v[0];
+      v[0] = v[1], v[1] = v[2], v[2] = v[3], v[3] = first;
+    }
+    // Wind so the geometric normal points to decreasing f (out of the region f >= iso).
+    const glm::dvec3 gw = t.g / c_.xf.spacing;
+    const glm::dvec3 p0 = Position(v[0]), p1 = Position(v[1]), p2 = Position(v[2]);
+    const bool flip = glm::dot(glm::cross(p1 - p0, p2 - p0), gw) > 0;
+    const uint8_t surface = c_.iso_surface[s];
+    auto tri = [&](uint32_t a, uint32_t b, uint32_t d) {
+      if (flip) std::swap(b, d);
+      if (c_.clip && !InsideDataBox(t)) {
+        ClipTriangle(a, b, d, surface);
+        return;
+      }
+      out_->mesh.triangles.insert(out_->mesh.triangles.end(), {a, b, d});
+      out_->mesh.surface.push_back(surface);
+    };
+    tri(v[0], v[1], v[2]);
+    if (nv == 4) tri(v[0], v[2], v[3]);
+    return nv == 4 ? 2 : 1;
+  }
+
+  // A quad is split along its shorter diagonal (better triangles); equal lengths are broken by
+  // position, so the choice does not depend on the tetrahedron's vertex order.
+  bool QuadSplitsAlong13(const uint32_t v[4]) const {
+    const glm::dvec3 p0 = Position(v[0]), p1 = Position(v[1]), p2 = Position(v[2]),
+                     p3 = Position(v[3]);
+    const double d02 = glm::dot(p2 - p0, p2 - p0), d13 = glm::dot(p3 - p1, p3 - p1);
+    if (d02 != d13) return d13 < d02;
+    auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
+      return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+    };
+    const glm::dvec3 m02 = less(p0, p2) ? p0 : p2, m13 = less(p1, p3) ? p1 : p3;
+    return less(m13, m02);
+  }
+
+  glm::dvec3 Position(uint32_t i) const {
+    const float* p = &out_->mesh.positions[3 * size_t(i)];
+    return {p[0], p[1], p[2]};
+  }
+
+  bool InsideDataBox(const Node& t) const {
+    for (int i = 0; i < 4; ++i)
+      for (int a = 0; a < 3; ++a)
+        if (t.v[i][a] > c_.data_max[a]) return false;
+    return true;
+  }
+
+  // Key of (edge, surface): the lower-index endpoint, the edge's direction and scale.
+  uint64_t EdgeKey(const glm::ivec3& lo, const glm::ivec3& hi, int s) const {
+    const glm::ivec3 d = hi - lo;
+    const int scale = std::max(std::max(std::abs(d.x), std::abs(d.y)), std::abs(d.z));
+    const glm::ivec3 u = d / scale;
+    const int dir = (u.x + 1) * 9 + (u.y + 1) * 3 + (u.z + 1);
+    const int code = dir * 11 + __builtin_ctz(static_cast<unsigned>(scale));
+    return (uint64_t(c_.Index(lo)) << 13) | (uint64_t(code) << 4) | uint64_t(s);
+  }
+
+  uint32_t EdgeVertex(const Node& t, int ia, int ib, int s) {
+    glm::ivec3 a = t.v[ia], b = t.v[ib];
+    float fa = t.f[ia], fb = t.f[ib];
+    if (c_.Index(b) < c_.Index(a)) {  // canonical endpoint order: same bits from every tet
+      std::swap(a, b);
+      std::swap(fa, fb);
+    }
+    const uint32_t fresh = static_cast<uint32_t>(out_->mesh.vertex_count());
+    const bool share = c_.normals == NormalMode::kSmooth;
+    uint64_t key = 0;
+    if (share) {
+      key = EdgeKey(a, b, s);
+      const uint32_t found = table_->FindOrInsert(key, fresh);
+      if (found != EdgeVertexTable::kMissing) return found;
+    }
+    const double tt = (double(c_.iso[s]) - fa) / (double(fb) - fa);
+    const glm::dvec3 pg = glm::dvec3(a) + tt * glm::dvec3(b - a);
+    const glm::dvec3 pw = c_.xf.origin + c_.xf.spacing * pg;
+    glm::dvec3 grad = share ? glm::mix(GridGradient(a), GridGradient(b), tt) : t.g;
+    grad /= c_.xf.spacing;
+    if (glm::dot(grad, grad) == 0) grad = t.g / c_.xf.spacing;
+    const double len = glm::length(grad);
+    const glm::dvec3 nrm = len > 0 ? -grad / len : glm::dvec3(0.0);
+    out_->mesh.positions.insert(out_->mesh.positions.end(),
+                                {float(pw.x), float(pw.y), float(pw.z)});
+    out_->mesh.normals.insert(out_->mesh.normals.end(), {float(nrm.x), float(nrm.y), float(nrm.z)});
+    if (share && faces_.EdgeOnFace(a, b)) out_->boundary.push_back({fresh, key});
+    return fresh;
+  }
+
+  // Central differences of the samples at a grid point, one-sided on the cube's faces.
+  glm::dvec3 GridGradient(const glm::ivec3& p) const {
+    glm::dvec3 g;
+    const ptrdiff_t stride[3] = {1, c_.sy, c_.sz};
+    const size_t i = c_.Index(p);
+    for (int a = 0; a < 3; ++a) {
+      const bool lo = p[a] > 0, hi = p[a] < c_.n - 1;
+      const double up = c_.f[hi ? i + stride[a] : i], down = c_.f[lo ? i - stride[a] : i];
+      g[a] = (up - down) / ((hi ? 1 : 0) + (lo ? 1 : 0));
+    }
+    return g;
+  }
+
+  // A leaf that straddles the data box: keep the part of the triangle inside it.
+  void ClipTriangle(uint32_t a, uint32_t b, uint32_t d, uint8_t surface) {
+    struct V {
+      glm::dvec3 p, n;
+    };
+    auto load = [&](uint32_t i) {
+      const float* q = &out_->mesh.normals[3 * size_t(i)];
+      return V{Position(i), glm::dvec3(q[0], q[1], q[2])};
+    };
+    V poly[9], next[9];
+    uint32_t ids[9], next_ids[9];
+    int count = 3;
+    poly[0] = load(a), poly[1] = load(b), poly[2] = load(d);
+    ids[0] = a, ids[1] = b, ids[2] = d;
+    for (int axis = 0; axis < 3; ++axis) {
+      const double limit = c_.xf.origin[axis] + c_.xf.spacing[axis] * c_.data_max[axis];
+      int m = 0;
+      for (int i = 0; i < count; ++i) {
+        const V& p = poly[i];
+        const V& q = poly[(i + 1) % count];
+        const bool pin = p.p[axis] <= limit, qin = q.p[axis] <= limit;
+        if (pin) next[m] = p, next_ids[m++] = ids[i];
+        if (pin != qin) {
+          const double s = (limit - p.p[axis]) / (q.p[axis] - p.p[axis]);
+          next[m] = V{glm::mix(p.p, q.p, s), glm::normalize(glm::mix(p.n, q.n, s))};
+          next[m].p[axis] = limit;
+          next_ids[m++] = EdgeVertexTable::kMissing;
+        }
+      }
+      count = m;
+      std::copy(next, next + m, poly);
+      std::copy(next_ids, next_ids + m, ids);
+      if (count < 3) return;
+    }
+    for (int i = 0; i < count; ++i) {
+      if (ids[i] != EdgeVertexTable::kMissing) continue;
+      ids[i] = static_cast<uint32_t>(out_->mesh.vertex_count());
+      out_->mesh.positions.insert(out_->mesh.positions.end(),
+                                  {float(poly[i].p.x), float(poly[i].p.y), float(poly[i].p.z)});
+      out_->mesh.normals.insert(out_->mesh.normals.end(),
+                                {float(poly[i].n.x), float(poly[i].n.y), float(poly[i].n.z)});
+    }
+    for (int i = 1; i + 1 < count; ++i) {
+      out_->mesh.triangles.insert(out_->mesh.triangles.end(), {ids[0], ids[i], ids[i + 1]});
+      out_->mesh.surface.push_back(surface);
+    }
+  }
+
+  const Context& c_;
+  EdgeVertexTable* table_;
+  SubtreeMesh* out_;
+  RootFaces faces_{TetVertices{}};
+};
+
+}  // namespace isostream::extract_internal

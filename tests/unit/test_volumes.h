@@ -1,0 +1,46 @@
+// Small synthetic volumes for unit tests, built straight into hierarchy samples.
+#pragma once
+
+#include <cmath>
+#include <functional>
+
+#include "server/hierarchy/hierarchy.h"
+
+namespace isostream::testing {
+
+// Samples f over [-1,1]^3 on a (2^k+1)^3 cube; data_dims may shrink the data box.
+inline PaddedSamples MakeSamples(int k, const std::function<float(double, double, double)>& f) {
+  PaddedSamples s;
+  s.k = k;
+  s.n = (1 << k) + 1;
+  s.data_dims = {s.n, s.n, s.n};
+  s.values.resize(static_cast<size_t>(s.n) * s.n * s.n);
+  const double c = 2.0 / (s.n - 1);
+  for (int z = 0; z < s.n; ++z)
+    for (int y = 0; y < s.n; ++y)
+      for (int x = 0; x < s.n; ++x)
+        s.values[(static_cast<size_t>(z) * s.n + y) * s.n + x] = f(x * c - 1, y * c - 1, z * c - 1);
+  return s;
+}
+
+inline HierarchyPtr MakeHierarchy(int k, const std::function<float(double, double, double)>& f) {
+  auto h = BuildHierarchy(MakeSamples(k, f));
+  return h.ok() ? *h : nullptr;
+}
+
+inline float SphereField(double x, double y, double z) {
+  return float(std::sqrt(x * x + y * y + z * z));
+}
+// Three Gaussian blobs: nested, closed level sets well inside the domain.
+inline float BlobsField(double x, double y, double z) {
+  auto g = [&](double cx, double cy, double cz, double s) {
+    const double d2 = (x - cx) * (x - cx) + (y - cy) * (y - cy) + (z - cz) * (z - cz);
+    return std::exp(-d2 / (s * s));
+  };
+  return float(g(-0.3, -0.2, 0.1, 0.35) + g(0.35, 0.25, -0.1, 0.3) + 0.8 * g(0.0, 0.3, 0.35, 0.25));
+}
+inline float CayleyField(double x, double y, double z) {
+  return float(16 * x * y * z + 4 * (x + y + z) - 1);
+}
+
+}  // namespace isostream::testing
