@@ -1,0 +1,82 @@
+#include "server/volume/load.h"
+
+#include <algorithm>
+#include <cctype>
+#include <exception>
+#include <new>
+#include <string>
+
+#include "server/volume/generators.h"
+#include "server/volume/loaders.h"
+#include "server/volume/sample_reader.h"
+
+namespace isostream {
+namespace {
+
+bool EndsWith(std::string_view s, std::string_view suffix) {
+  if (s.size() < suffix.size()) return false;
+  return std::equal(suffix.begin(), suffix.end(), s.end() - suffix.size(), [](char a, char b) {
+    return std::tolower(static_cast<unsigned char>(a)) == b;
+  });
+}
+
+// "word:..." with a word of two or more letters, digits or '_' is a generator spec, so that an
+// unknown generator gets "unknown generator" rather than "no such file"; the length rule keeps
+// Windows-style "C:..." paths out.
+bool LooksLikeGenerator(std::string_view spec) {
+  const size_t colon = spec.find(':');
+  if (colon == std::string_view::npos || colon < 2) return false;
+  if (!std::isalpha(static_cast<unsigned char>(spec[0]))) return false;
+  return std::all_of(spec.begin(), spec.begin() + colon, [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '_';
+  });
+}
+
+absl::StatusOr<VolumePtr> LoadFromSpec(std::string_view spec, const VolumeLimits& limits) {
+  if (spec.empty()) return absl::InvalidArgumentError("empty volume spec");
+  if (spec.substr(0, 4) == "raw:") return LoadRawSpec(spec, limits);
+  const std::string spec_text(spec);
+  if (LooksLikeGenerator(spec) && !CheckInputFile(spec_text).ok()) {
+    return GenerateVolume(spec, limits);
+  }
+
+  std::string path = spec_text;
+  std::string grid_name;
+  const size_t hash = spec.rfind('#');
+  if (hash != std::string_view::npos && EndsWith(spec.substr(0, hash), ".vdb") &&
+      !CheckInputFile(spec_text).ok()) {
+    path = spec_text.substr(0, hash);
+    grid_name = spec_text.substr(hash + 1);
+  }
+  if (EndsWith(path, ".vdb")) return LoadVdbFile(spec_text, path, grid_name, limits);
+  if (EndsWith(path, ".nii") || EndsWith(path, ".nii.gz")) {
+    return LoadNiftiFile(spec_text, path, limits);
+  }
+  ISOSTREAM_RETURN_IF_ERROR(CheckInputFile(path));
+  std::string generators;
+  for (const char* const* g = GeneratorNames(); *g != nullptr; ++g) {
+    generators += std::string(generators.empty() ? "" : ", ") + *g;
+  }
+  return absl::InvalidArgumentError(
+      path +
+      ": unrecognised volume type; expected a .vdb, .nii or .nii.gz file, "
+      "raw:PATH:NXxNYxNZ:TYPE[:le|be], or a generator NAME:N (" +
+      generators + ")");
+}
+
+}  // namespace
+
+absl::StatusOr<VolumePtr> LoadVolume(std::string_view spec, const VolumeLimits& limits) {
+  // The module edge: nothing thrown by OpenVDB, TBB or the standard library gets past here.
+  try {
+    return LoadFromSpec(spec, limits);
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError(std::string(spec) + ": out of memory while loading");
+  } catch (const std::exception& e) {
+    return absl::InternalError(std::string(spec) + ": " + e.what());
+  } catch (...) {
+    return absl::UnknownError(std::string(spec) + ": unknown exception while loading");
+  }
+}
+
+}  // namespace isostream

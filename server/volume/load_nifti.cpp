@@ -1,0 +1,160 @@
+// NIfTI-1 single-file volumes (.nii, .nii.gz), following the nifti1.h header layout of the
+// NIfTI Data Format Working Group (348-byte header, magic "n+1").
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <string>
+
+#include "server/volume/loaders.h"
+#include "server/volume/sample_reader.h"
+
+namespace isostream {
+namespace {
+
+constexpr int kHeaderSize = 348;
+
+// Byte offsets of the nifti_1_header fields this loader reads.
+constexpr int kDimOffset = 40;         // short dim[8]
+constexpr int kDatatypeOffset = 70;    // short
+constexpr int kBitpixOffset = 72;      // short
+constexpr int kPixdimOffset = 76;      // float pixdim[8]
+constexpr int kVoxOffsetOffset = 108;  // float
+constexpr int kSclSlopeOffset = 112;   // float
+constexpr int kSclInterOffset = 116;   // float
+constexpr int kQformCodeOffset = 252;  // short
+constexpr int kSformCodeOffset = 254;  // short
+constexpr int kQoffsetOffset = 268;    // float qoffset_x, _y, _z
+constexpr int kSrowOffset = 280;       // float srow_x[4], srow_y[4], srow_z[4]
+constexpr int kMagicOffset = 344;      // char[4]
+
+// NIfTI-1 datatype codes (nifti1.h DT_*).
+struct NiftiType {
+  int16_t code;
+  SampleType type;
+};
+constexpr NiftiType kNiftiTypes[] = {
+    {2, SampleType::kUint8}, {4, SampleType::kInt16},    {512, SampleType::kUint16},
+    {8, SampleType::kInt32}, {16, SampleType::kFloat32}, {64, SampleType::kFloat64},
+};
+
+class HeaderView {
+ public:
+  HeaderView(const unsigned char* bytes, bool swap) : bytes_(bytes), swap_(swap) {}
+  int32_t I32(int offset) const { return Load<int32_t>(offset); }
+  int16_t I16(int offset) const { return Load<int16_t>(offset); }
+  float F32(int offset) const { return Load<float>(offset); }
+
+ private:
+  template <typename T>
+  T Load(int offset) const {
+    unsigned char b[sizeof(T)];
+    for (size_t i = 0; i < sizeof(T); ++i) b[i] = bytes_[offset + (swap_ ? sizeof(T) - 1 - i : i)];
+    T v;
+    std::memcpy(&v, b, sizeof(T));
+    return v;
+  }
+  const unsigned char* bytes_;
+  bool swap_;
+};
+
+}  // namespace
+
+absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::string& path,
+                                        const VolumeLimits& limits) {
+  GzInput input;
+  ISOSTREAM_RETURN_IF_ERROR(input.Open(path));
+  unsigned char bytes[kHeaderSize];
+  ISOSTREAM_ASSIGN_OR_RETURN(const size_t got, input.Read(bytes, kHeaderSize));
+  // sizeof_hdr is 348 in the writer's byte order, which tells us the file's endianness.
+  const HeaderView native(bytes, false), swapped(bytes, true);
+  const bool starts_like_nifti =
+      got >= 4 && (native.I32(0) == kHeaderSize || swapped.I32(0) == kHeaderSize);
+  if (!starts_like_nifti) {
+    return absl::InvalidArgumentError(
+        path + ": not a NIfTI-1 file (sizeof_hdr is " +
+        (got >= 4 ? std::to_string(native.I32(0)) : std::string("missing")) + ", expected 348)");
+  }
+  if (got < kHeaderSize) {
+    return absl::DataLossError(path + ": truncated NIfTI-1 header (" + std::to_string(got) +
+                               " of 348 bytes)");
+  }
+  const bool swap = native.I32(0) != kHeaderSize;
+  const HeaderView h(bytes, swap);
+  if (std::memcmp(bytes + kMagicOffset, "ni1\0", 4) == 0) {
+    return absl::InvalidArgumentError(path +
+                                      ": NIfTI-1 header/image pair (.hdr/.img) is not supported; "
+                                      "convert to a single .nii file");
+  }
+  if (std::memcmp(bytes + kMagicOffset, "n+1\0", 4) != 0) {
+    return absl::InvalidArgumentError(path + ": not a NIfTI-1 file (magic is not \"n+1\")");
+  }
+
+  int16_t dim[8];
+  for (int i = 0; i < 8; ++i) dim[i] = h.I16(kDimOffset + 2 * i);
+  if (!(dim[0] == 3 || (dim[0] == 4 && dim[4] == 1))) {
+    return absl::InvalidArgumentError(path +
+                                      ": not a 3D volume (dim[0] = " + std::to_string(dim[0]) +
+                                      ", dim[4] = " + std::to_string(dim[4]) + ")");
+  }
+  ISOSTREAM_RETURN_IF_ERROR(CheckDims({dim[1], dim[2], dim[3]}, limits, path));
+
+  const int16_t datatype = h.I16(kDatatypeOffset);
+  SampleLayout layout;
+  bool known_type = false;
+  for (const NiftiType& t : kNiftiTypes) {
+    if (t.code == datatype) {
+      layout.type = t.type;
+      known_type = true;
+    }
+  }
+  if (!known_type) {
+    return absl::InvalidArgumentError(
+        path + ": unsupported NIfTI datatype " + std::to_string(datatype) +
+        " (supported: uint8, int16, uint16, int32, float32, float64)");
+  }
+  const int16_t bitpix = h.I16(kBitpixOffset);
+  if (bitpix != 8 * SampleBytes(layout.type)) {
+    return absl::InvalidArgumentError(path + ": bitpix " + std::to_string(bitpix) +
+                                      " does not match datatype " + SampleTypeName(layout.type));
+  }
+  layout.dims = {dim[1], dim[2], dim[3]};
+  layout.big_endian = swap != (__BYTE_ORDER__ == __ORDER_BIG_ENDIAN__);
+
+  // nifti1.h: scaling applies only when scl_slope is nonzero (and, sensibly, finite).
+  const float slope = h.F32(kSclSlopeOffset), inter = h.F32(kSclInterOffset);
+  if (slope != 0 && std::isfinite(slope)) {
+    layout.slope = slope;
+    layout.inter = std::isfinite(inter) ? inter : 0.0;
+  }
+
+  // Spacing from pixdim (sign belongs to the orientation, not the step); a missing or broken
+  // pixdim means unit spacing rather than a rejected file.
+  std::array<double, 3> spacing;
+  for (int i = 0; i < 3; ++i) {
+    const double p = std::fabs(h.F32(kPixdimOffset + 4 * (i + 1)));
+    spacing[i] = std::isfinite(p) && p > 0 ? p : 1.0;
+  }
+  // Origin: the world position of voxel (0,0,0) from sform, else qform, else 0. The orientation
+  // (rotation, flips) is not applied: samples stay on an axis-aligned grid.
+  std::array<double, 3> origin{0, 0, 0};
+  if (h.I16(kSformCodeOffset) > 0) {
+    for (int i = 0; i < 3; ++i) origin[i] = h.F32(kSrowOffset + 16 * i + 12);
+  } else if (h.I16(kQformCodeOffset) > 0) {
+    for (int i = 0; i < 3; ++i) origin[i] = h.F32(kQoffsetOffset + 4 * i);
+  }
+  for (double& o : origin) {
+    if (!std::isfinite(o)) o = 0;
+  }
+
+  const float vox_offset = h.F32(kVoxOffsetOffset);
+  if (!(vox_offset >= kHeaderSize) || vox_offset > 1e9f) {
+    return absl::InvalidArgumentError(path + ": vox_offset " + std::to_string(vox_offset) +
+                                      " is not past the 348-byte header");
+  }
+  ISOSTREAM_RETURN_IF_ERROR(input.Skip(static_cast<size_t>(vox_offset) - kHeaderSize));
+
+  std::string grid_name = path.substr(path.find_last_of('/') + 1);
+  return ReadSamples(input, layout, spec, grid_name, spacing, origin);
+}
+
+}  // namespace isostream

@@ -1,0 +1,24 @@
+// Private to server/volume: one loader per kind of source. LoadVolume (load.cpp) picks one from
+// the spec and is the only caller; each returns a status whose message starts with its input.
+#pragma once
+
+#include <string>
+#include <string_view>
+
+#include "server/volume/volume.h"
+#include "shared/status.h"
+
+namespace isostream {
+
+// PATH's float grid GRID_NAME, or its first float grid when GRID_NAME is empty.
+absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string& path,
+                                      const std::string& grid_name, const VolumeLimits& limits);
+
+// A single-file NIfTI-1 volume, gzip-compressed or not.
+absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::string& path,
+                                        const VolumeLimits& limits);
+
+// SPEC is "raw:PATH:NXxNYxNZ:TYPE[:le|be]".
+absl::StatusOr<VolumePtr> LoadRawSpec(std::string_view spec, const VolumeLimits& limits);
+
+}  // namespace isostream
