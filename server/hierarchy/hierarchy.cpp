@@ -26,6 +26,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -50,7 +51,10 @@ class HierarchyBuilder {
 
   void Run(const HierarchyBuildOptions& options) {
     const size_t total = hier_.samples_.size();
-    hier_.eta_.assign(total, 0.0f);  // corners stay 0: they refine nothing
+    // Every point but the 8 corners is written by exactly one pass (first touch in parallel).
+    hier_.eta_.resize(total);
+    for (int c = 0; c < 8; ++c)
+      hier_.eta_[hier_.index((c & 1) ? last_ : 0, (c & 2) ? last_ : 0, (c & 4) ? last_ : 0)] = 0;
     size_t done = 0;
     for (int h = 0; h < k_; ++h) {
       for (DiamondKind kind : {DiamondKind::kEdge, DiamondKind::kFace, DiamondKind::kCube}) {
@@ -174,7 +178,8 @@ class HierarchyBuilder {
   int k_, n_, last_;
 };
 
-absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples, std::vector<float> eta) {
+absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
+                                               UninitializedVector<float> eta) {
   const size_t n = static_cast<size_t>(samples.n);
   if (samples.k < 1 || samples.n != (1 << samples.k) + 1 || samples.values.size() != n * n * n)
     return absl::InvalidArgumentError("hierarchy: samples are not a (2^k+1)^3 cube");
@@ -191,10 +196,16 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples, std::vecto
 
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options) {
-  for (float v : samples.values)
-    if (!std::isfinite(v)) return absl::InvalidArgumentError("hierarchy: non-finite sample");
+  const bool finite = tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, samples.values.size()), true,
+      [&](const tbb::blocked_range<size_t>& r, bool ok) {
+        for (size_t i = r.begin(); ok && i != r.end(); ++i) ok = std::isfinite(samples.values[i]);
+        return ok;
+      },
+      [](bool a, bool b) { return a && b; });
+  if (!finite) return absl::InvalidArgumentError("hierarchy: non-finite sample");
   ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built,
-                             AssembleHierarchy(std::move(samples), std::vector<float>()));
+                             AssembleHierarchy(std::move(samples), UninitializedVector<float>()));
   auto* h = const_cast<Hierarchy*>(built.get());
   HierarchyBuilder builder(h);
   tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);

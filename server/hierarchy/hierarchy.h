@@ -19,6 +19,7 @@
 
 #include "server/volume/padded_samples.h"
 #include "shared/status.h"
+#include "shared/uninitialized_vector.h"
 
 namespace isostream {
 
@@ -42,12 +43,12 @@ class Hierarchy {
  private:
   friend class HierarchyBuilder;
   friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(PaddedSamples samples,
-                                                                            std::vector<float> eta);
+                                                                            UninitializedVector<float> eta);
   int k_ = 0;
   int n_ = 0;
   std::array<int, 3> data_dims_{0, 0, 0};
   std::vector<float> samples_;
-  std::vector<float> eta_;
+  UninitializedVector<float> eta_;
 };
 
 using HierarchyPtr = std::shared_ptr<const Hierarchy>;
@@ -63,6 +64,6 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options = {});
 
 // Wraps a hierarchy whose eta was computed before (the on-disk cache). Sizes must match.
-absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples, std::vector<float> eta);
+absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples, UninitializedVector<float> eta);
 
 }  // namespace isostream

@@ -40,7 +40,7 @@ uint64_t SamplesHash(const PaddedSamples& s) {
 
 // Reads the cached eta, or explains why it cannot be used.
 bool ReadCache(const std::string& path, const PaddedSamples& s, uint64_t samples_hash,
-               std::vector<float>* eta, std::string* why) {
+               UninitializedVector<float>* eta, std::string* why) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     *why = "no cache entry";
@@ -159,7 +159,7 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   }
   const uint64_t hash = SamplesHash(samples);
   const std::string path = PathFor(cache.dir, samples.k, hash);
-  std::vector<float> eta;
+  UninitializedVector<float> eta;
   if (ReadCache(path, samples, hash, &eta, &reason)) {
     if (outcome) *outcome = CacheOutcome::kHit;
     if (why) *why = "loaded " + path;
