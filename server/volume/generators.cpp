@@ -11,6 +11,7 @@
 
 #include "server/volume/grid_builder.h"
 #include "server/volume/load.h"
+#include "server/volume/sample_reader.h"
 
 namespace isostream {
 namespace {
@@ -33,6 +34,23 @@ std::vector<double> AxisCoordinates(int n) {
 // Closed forms in the header's words; inline here so the sampling loops can vectorise them.
 inline double Cayley(double x, double y, double z) { return 16 * x * y * z + 4 * (x + y + z) - 1; }
 inline double Radius(double x, double y, double z) { return std::sqrt(x * x + y * y + z * z); }
+
+inline double Shells(double r) {
+  // Start from the outermost plateau and add each step back in going inwards.
+  // Most samples lie on a plateau, so only a transition the radius is inside costs a smoothstep.
+  double f = kShellPlateauValues[kShellCount - 1];
+  for (int t = 0; t < kShellCount - 1; ++t) {
+    const double step = kShellPlateauValues[t] - kShellPlateauValues[t + 1];
+    const double u = (r - kShellTransitionRadii[t] + kShellTransitionHalfWidth) *
+                     (0.5 / kShellTransitionHalfWidth);
+    if (u <= 0) {
+      f += step;
+    } else if (u < 1) {
+      f += step * (1 - Smooth(u));
+    }
+  }
+  return f;
+}
 
 // --- buckyball ----------------------------------------------------------------------------------
 
@@ -186,6 +204,10 @@ double NoiseFace(int ix, const NoiseAxis& ay, const NoiseAxis& az, int octave, u
 
 class NoiseRows {
  public:
+  // Lattice planes crossed by [-1, 1] at the finest octave, plus the closing plane and slack.
+  static constexpr int kMaxPlanes =
+      static_cast<int>(2 * (1 << (kNoiseOctaves - 1)) / kNoiseBaseCell) + 3;
+
   // Every axis samples the same coordinates, so one table of cells and weights serves x, y, z.
   NoiseRows(const std::vector<double>& coords, uint32_t seed)
       : n_(static_cast<int>(coords.size())), seed_(seed) {
@@ -196,20 +218,25 @@ class NoiseRows {
   }
 
   // Same arithmetic, in the same order, as NoiseValue: rows equal the point function exactly.
+  // The y-z blends of the lattice planes the row crosses are computed once per row, so the
+  // per-sample work is two table reads and a lerp per octave.
   void operator()(int j, int k, float* out) const {
-    int cached_cell[kNoiseOctaves];
-    double face0[kNoiseOctaves] = {}, face1[kNoiseOctaves] = {};
-    for (int o = 0; o < kNoiseOctaves; ++o) cached_cell[o] = INT32_MIN;
+    double faces[kNoiseOctaves][kMaxPlanes];
+    int first_cell[kNoiseOctaves];
+    for (int o = 0; o < kNoiseOctaves; ++o) {
+      first_cell[o] = axis_[o][0].cell;
+      const int planes = axis_[o][n_ - 1].cell + 2 - first_cell[o];
+      for (int p = 0; p < planes; ++p) {
+        faces[o][p] = NoiseFace(first_cell[o] + p, axis_[o][j], axis_[o][k], o, seed_);
+      }
+    }
     for (int i = 0; i < n_; ++i) {
       double sum = 0;
       for (int o = 0; o < kNoiseOctaves; ++o) {
         const NoiseAxis& ax = axis_[o][i];
-        if (ax.cell != cached_cell[o]) {
-          cached_cell[o] = ax.cell;
-          face0[o] = NoiseFace(ax.cell, axis_[o][j], axis_[o][k], o, seed_);
-          face1[o] = NoiseFace(ax.cell + 1, axis_[o][j], axis_[o][k], o, seed_);
-        }
-        sum += kOctaveWeight[o] * (face0[o] + (face1[o] - face0[o]) * ax.weight);
+        const double f0 = faces[o][ax.cell - first_cell[o]];
+        const double f1 = faces[o][ax.cell - first_cell[o] + 1];
+        sum += kOctaveWeight[o] * (f0 + (f1 - f0) * ax.weight);
       }
       out[i] = static_cast<float>(sum);
     }
@@ -258,6 +285,13 @@ absl::StatusOr<VolumePtr> SamplePoints(std::string_view spec, const char* grid_n
 
 const char* const kGeneratorNames[] = {"cayley", "buckyball", "sphere", "shells", "noise", nullptr};
 
+bool IsGeneratorName(std::string_view name) {
+  for (const char* const* g = kGeneratorNames; *g != nullptr; ++g) {
+    if (name == *g) return true;
+  }
+  return false;
+}
+
 bool ParseInt64(std::string_view s, int64_t* out) {
   if (s.empty()) return false;
   const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), *out);
@@ -276,17 +310,7 @@ double CayleyValue(double x, double y, double z) { return Cayley(x, y, z); }
 
 double SphereValue(double x, double y, double z) { return Radius(x, y, z); }
 
-double ShellsValue(double r) {
-  // Start from the outermost plateau and add each step back in going inwards.
-  double f = kShellPlateauValues[kShellCount - 1];
-  for (int t = 0; t < kShellCount - 1; ++t) {
-    const double step = kShellPlateauValues[t] - kShellPlateauValues[t + 1];
-    const double u = (r - kShellTransitionRadii[t] + kShellTransitionHalfWidth) /
-                     (2 * kShellTransitionHalfWidth);
-    f += step * (1 - Smooth(u));
-  }
-  return f;
-}
+double ShellsValue(double r) { return Shells(r); }
 
 double BuckyballValue(double x, double y, double z) {
   const BuckyballModel& m = Buckyball();
@@ -320,11 +344,11 @@ absl::StatusOr<VolumePtr> GenerateVolume(std::string_view spec, const VolumeLimi
   }
   const std::string_view name = parts[0];
   const std::string where = "generator spec '" + std::string(spec) + "'";
-  if (std::find_if(kGeneratorNames, kGeneratorNames + 5,
-                   [&](const char* g) { return name == g; }) == kGeneratorNames + 5) {
+  if (!IsGeneratorName(name)) {
     std::string known;
-    for (const char* const* g = kGeneratorNames; *g; ++g)
+    for (const char* const* g = kGeneratorNames; *g != nullptr; ++g) {
       known += std::string(known.empty() ? "" : ", ") + *g;
+    }
     return absl::NotFoundError(where + ": unknown generator '" + std::string(name) +
                                "' (known: " + known + ")");
   }
@@ -338,16 +362,7 @@ absl::StatusOr<VolumePtr> GenerateVolume(std::string_view spec, const VolumeLimi
     return absl::InvalidArgumentError(where + ": N '" + std::string(parts[1]) +
                                       "' is not an integer");
   }
-  if (n < 2) {
-    return absl::InvalidArgumentError(where + ": N = " + std::to_string(n) +
-                                      " but at least 2 samples per axis are needed");
-  }
-  if (n > limits.max_dim || n * n * n > limits.max_voxels) {
-    return absl::ResourceExhaustedError(where + ": N = " + std::to_string(n) +
-                                        " exceeds the limits (" + std::to_string(limits.max_dim) +
-                                        " per axis, " + std::to_string(limits.max_voxels) +
-                                        " samples)");
-  }
+  ISOSTREAM_RETURN_IF_ERROR(CheckDims({n, n, n}, limits, where));
   const int size = static_cast<int>(n);
 
   if (name == "cayley") {
@@ -360,7 +375,7 @@ absl::StatusOr<VolumePtr> GenerateVolume(std::string_view spec, const VolumeLimi
   }
   if (name == "shells") {
     return SamplePoints(spec, "shells", size,
-                        [](double x, double y, double z) { return ShellsValue(Radius(x, y, z)); });
+                        [](double x, double y, double z) { return Shells(Radius(x, y, z)); });
   }
   if (name == "buckyball") {
     const BuckyballRows rows(AxisCoordinates(size));

@@ -20,17 +20,7 @@ constexpr int kMaxHierarchyLevel = 12;
 // Leaf buffers are z fastest: consecutive x are a plane of the leaf apart.
 constexpr int kLeafXStride = FloatLeaf::DIM * FloatLeaf::DIM;
 
-}  // namespace
-
-int HierarchyLevelFor(const std::array<int, 3>& dims) {
-  const int64_t largest = std::max({dims[0], dims[1], dims[2]});
-  int k = 0;
-  while ((int64_t{1} << k) + 1 < largest) ++k;
-  return k;
-}
-
-absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume) {
-  const std::string where = "padding '" + volume.name + "'";
+absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where) {
   const std::array<int, 3>& dims = volume.dims;
   if (volume.grid == nullptr) return absl::InvalidArgumentError(where + ": volume has no grid");
   if (std::min({dims[0], dims[1], dims[2]}) < 2) {
@@ -51,12 +41,7 @@ absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume) {
   out.data_dims = dims;
   const int n = out.n;
   const size_t plane = static_cast<size_t>(n) * n;
-  try {
-    out.values.resize(plane * n);
-  } catch (const std::bad_alloc&) {
-    return absl::ResourceExhaustedError(where + ": cannot allocate " + std::to_string(n) +
-                                        "^3 samples");
-  }
+  out.values.resize(plane * n);
   float* cube = out.values.data();
 
   // Copy the data box to the cube's origin corner, leaf block by leaf block.
@@ -102,6 +87,27 @@ absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume) {
     }
   });
   return out;
+}
+
+}  // namespace
+
+int HierarchyLevelFor(const std::array<int, 3>& dims) {
+  const int64_t largest = std::max({dims[0], dims[1], dims[2]});
+  int k = 0;
+  while ((int64_t{1} << k) + 1 < largest) ++k;
+  return k;
+}
+
+absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume) {
+  const std::string where = "padding '" + volume.name + "'";
+  // A module edge like LoadVolume: a throw from OpenVDB or TBB becomes a status here.
+  try {
+    return Pad(volume, where);
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError(where + ": out of memory");
+  } catch (const std::exception& e) {
+    return absl::InternalError(where + ": " + e.what());
+  }
 }
 
 }  // namespace isostream

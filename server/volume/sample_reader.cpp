@@ -129,8 +129,8 @@ absl::Status CheckDims(const std::array<int64_t, 3>& dims, const VolumeLimits& l
                                           std::to_string(limits.max_dim) + " samples per axis");
     }
   }
-  // Each factor is at most max_dim here, so the product cannot overflow for sane limits.
-  if (dims[0] * dims[1] * dims[2] > limits.max_voxels) {
+  // Divide rather than multiply: dims come from untrusted headers and specs.
+  if (dims[0] > limits.max_voxels / dims[1] / dims[2]) {
     return absl::ResourceExhaustedError(where + ": dims " + text + " exceed the limit of " +
                                         std::to_string(limits.max_voxels) + " samples");
   }

@@ -5,9 +5,11 @@
 #include <algorithm>
 #include <cmath>
 #include <set>
+#include <vector>
 
 #include "server/volume/generators.h"
 #include "server/volume/load.h"
+#include "server/volume/padding.h"
 
 namespace isostream {
 namespace {
@@ -215,6 +217,59 @@ TEST(VolumeGenerators, BuckyballFieldHasTheDocumentedLevels) {
     const double s = 0.95 / kBuckyballCageRadius;
     EXPECT_LT(BuckyballValue(a[0] * s, a[1] * s, a[2] * s), 0.002);
   }
+}
+
+// Connected components, 6- or 26-connected, of the samples at or above ISO (ABOVE) or below it.
+int CountComponents(const PaddedSamples& cube, int connectivity, float iso, bool above) {
+  const auto inside = [&](float f) { return (f >= iso) == above; };
+  const int n = cube.n;
+  std::vector<int> label(cube.values.size(), 0);
+  std::vector<int> stack;
+  int components = 0;
+  for (size_t seed = 0; seed < label.size(); ++seed) {
+    if (label[seed] != 0 || !inside(cube.values[seed])) continue;
+    ++components;
+    label[seed] = components;
+    stack.clear();
+    stack.push_back(static_cast<int>(seed));
+    while (!stack.empty()) {
+      const int p = stack.back();
+      stack.pop_back();
+      const int x = p % n, y = p / n % n, z = p / (n * n);
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int manhattan = std::abs(dx) + std::abs(dy) + std::abs(dz);
+            if (manhattan == 0 || (connectivity == 6 && manhattan > 1)) continue;
+            const int qx = x + dx, qy = y + dy, qz = z + dz;
+            if (qx < 0 || qy < 0 || qz < 0 || qx >= n || qy >= n || qz >= n) continue;
+            const int q = (qz * n + qy) * n + qx;
+            if (label[q] == 0 && inside(cube.values[q])) {
+              label[q] = components;
+              stack.push_back(q);
+            }
+          }
+    }
+  }
+  return components;
+}
+
+// The three documented isovalues give three different topologies. Each count uses the
+// connectivity under which the claim is hardest to meet on a lattice: 26 when claiming parts
+// are apart, 6 when claiming they are joined.
+TEST(VolumeGenerators, BuckyballIsovaluesGiveNestedDistinctSurfaces) {
+  absl::StatusOr<VolumePtr> v = LoadVolume("buckyball:129");
+  ASSERT_TRUE(v.ok()) << v.status();
+  absl::StatusOr<PaddedSamples> cube = PadToHierarchyDomain(**v);  // 129 = 2^7 + 1: no padding
+  ASSERT_TRUE(cube.ok()) << cube.status();
+  // 0.25: sixty separate atoms.
+  EXPECT_EQ(CountComponents(*cube, 26, 0.25f, true), 60);
+  // 0.15: one bonded cage whose faces are open, so inside and outside are one region.
+  EXPECT_EQ(CountComponents(*cube, 6, 0.15f, true), 1);
+  EXPECT_EQ(CountComponents(*cube, 6, 0.15f, false), 1);
+  // 0.05: one closed shell; the hollow inside is cut off from the outside.
+  EXPECT_EQ(CountComponents(*cube, 6, 0.05f, true), 1);
+  EXPECT_EQ(CountComponents(*cube, 26, 0.05f, false), 2);
 }
 
 TEST(VolumeGenerators, BuckyballGridMatchesField) {
