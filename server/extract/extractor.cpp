@@ -61,12 +61,10 @@ double Ms(std::chrono::steady_clock::time_point since) {
 Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequest& r,
                     double eps) {
   Context c;
-  c.f = h.samples();
-  c.eta = h.eta();
+  c.pairs = h.pairs();
+  c.nb = (size_t(h.n()) + Hierarchy::kBrickMask) >> Hierarchy::kBrickLog2;
   c.k = h.k();
   c.n = h.n();
-  c.sy = h.n();
-  c.sz = ptrdiff_t(h.n()) * h.n();
   for (int a = 0; a < 3; ++a) c.data_max[a] = h.data_dims()[a] - 1;
   c.clip = c.data_max.x < c.n - 1 || c.data_max.y < c.n - 1 || c.data_max.z < c.n - 1;
   std::vector<std::pair<float, int>> sorted;
@@ -106,7 +104,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
   for (int i : order) {
     Node t;
     t.v = InitialVertices(tables, i, size);
-    for (int j = 0; j < 4; ++j) t.f[j] = c.f[c.Index(t.v[j])];
+    for (int j = 0; j < 4; ++j) t.f[j] = c.F(t.v[j]);
     const glm::dmat3 e(glm::dvec3(t.v[1] - t.v[0]), glm::dvec3(t.v[2] - t.v[0]),
                        glm::dvec3(t.v[3] - t.v[0]));
     const glm::dvec3 df(t.f[1] - t.f[0], t.f[2] - t.f[0], t.f[3] - t.f[0]);

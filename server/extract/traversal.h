@@ -37,10 +37,9 @@ struct Node {
 
 // Everything the traversal reads, fixed for one request.
 struct Context {
-  const float* f = nullptr;
-  const float* eta = nullptr;
+  const float* pairs = nullptr;  // Hierarchy::pairs(): sample at 2 i, eta at 2 i + 1
+  size_t nb = 0;                 // bricks per axis
   int k = 0, n = 0;
-  ptrdiff_t sy = 0, sz = 0;
   glm::ivec3 data_max{0};             // data box is [0, data_max]
   bool clip = false;                  // the data box is smaller than the cube
   float iso[kMaxSurfaces];            // ascending
@@ -54,7 +53,16 @@ struct Context {
   GridToWorld xf;
   const ReferenceTets* tables = nullptr;
 
-  size_t Index(const glm::ivec3& p) const { return p.x + p.y * sy + p.z * sz; }
+  // Hierarchy::index, inlined with the brick count at hand.
+  size_t Index(const glm::ivec3& p) const {
+    constexpr int b = Hierarchy::kBrickLog2, m = Hierarchy::kBrickMask;
+    const size_t brick = (size_t(p.z >> b) * nb + size_t(p.y >> b)) * nb + size_t(p.x >> b);
+    return (brick << (3 * b)) | (size_t(p.z & m) << (2 * b)) | (size_t(p.y & m) << b) |
+           size_t(p.x & m);
+  }
+  float F(size_t i) const { return pairs[2 * i]; }
+  float Eta(size_t i) const { return pairs[2 * i + 1]; }
+  float F(const glm::ivec3& p) const { return pairs[2 * Index(p)]; }
 };
 
 enum class Decision { kCull, kLeaf, kRefine };
@@ -83,7 +91,7 @@ inline Decision Decide(const Context& c, const Node& t) {
     IsoRange(c, fmin, fmax, &first, &last);  // exact: a crossing needs fmin < iso <= fmax
     return first < last ? Decision::kLeaf : Decision::kCull;
   }
-  const float e = c.eta[c.Index(RefinementPoint(t.v))];
+  const float e = c.Eta(c.Index(RefinementPoint(t.v)));
   // Any iso in [fmin - e, fmax + e] may meet f_full inside T.
   int a = 0;
   while (a < c.iso_count && c.iso[a] < fmin - e) ++a;
@@ -97,7 +105,7 @@ inline Decision Decide(const Context& c, const Node& t) {
 inline void Bisect(const Context& c, const Node& t, Node out[2]) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
   const glm::ivec3 x = RefinementPoint(t.v);
-  const float fx = c.f[c.Index(x)];
+  const float fx = c.F(x);
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
   const double w = double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]));
   // One normalised unit of the class is half the cube cell of this level.
@@ -115,6 +123,20 @@ inline void Bisect(const Context& c, const Node& t, Node out[2]) {
     o.g = t.g + w * rt.gradient_update[ch] / unit;
     o.cls = rt.child[ch];
     o.level = t.level + 1;
+  }
+  // The next reads are the children's and grandchildren's refinement vertices (eta and f in
+  // one cache line): start fetching them now so a DFS step does not wait on memory.
+  if (t.level + 2 < 3 * c.k) {
+    for (int ch = 0; ch < 2; ++ch) {
+      const Node& o = out[ch];
+      const ReferenceTet& rc = (*c.tables)[o.cls];
+      const glm::ivec3 points[5] = {o.v[0], o.v[1], o.v[2], o.v[3], RefinementPoint(o.v)};
+      __builtin_prefetch(c.pairs + 2 * c.Index(points[kRefinementPoint]));
+      for (int g = 0; g < 2; ++g) {
+        const glm::ivec3 mid = (points[rc.child_point[g][0]] + points[rc.child_point[g][3]]) / 2;
+        __builtin_prefetch(c.pairs + 2 * c.Index(mid));
+      }
+    }
   }
 }
 
@@ -332,12 +354,12 @@ class Traverser {
   // Central differences of the samples at a grid point, one-sided on the cube's faces.
   glm::dvec3 GridGradient(const glm::ivec3& p) const {
     glm::dvec3 g;
-    const ptrdiff_t stride[3] = {1, c_.sy, c_.sz};
-    const size_t i = c_.Index(p);
     for (int a = 0; a < 3; ++a) {
+      glm::ivec3 up = p, down = p;
       const bool lo = p[a] > 0, hi = p[a] < c_.n - 1;
-      const double up = c_.f[hi ? i + stride[a] : i], down = c_.f[lo ? i - stride[a] : i];
-      g[a] = (up - down) / ((hi ? 1 : 0) + (lo ? 1 : 0));
+      up[a] += hi;
+      down[a] -= lo;
+      g[a] = (double(c_.F(up)) - c_.F(down)) / ((hi ? 1 : 0) + (lo ? 1 : 0));
     }
     return g;
   }

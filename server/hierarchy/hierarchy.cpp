@@ -47,14 +47,16 @@ float RoundUp(double v) {
 
 class HierarchyBuilder {
  public:
-  explicit HierarchyBuilder(Hierarchy* h) : hier_(*h), k_(h->k_), n_(h->n_), last_(h->n_ - 1) {}
+  // Linear arrays, x fastest: the stencils below are fixed offsets there.
+  HierarchyBuilder(int k, const float* f, float* eta)
+      : f_(f), eta_(eta), k_(k), n_((1 << k) + 1), last_(1 << k) {}
 
   void Run(const HierarchyBuildOptions& options) {
-    const size_t total = hier_.samples_.size();
+    const size_t total = size_t(n_) * n_ * n_;
     // Every point but the 8 corners is written by exactly one pass (first touch in parallel).
-    hier_.eta_.resize(total);
     for (int c = 0; c < 8; ++c)
-      hier_.eta_[hier_.index((c & 1) ? last_ : 0, (c & 2) ? last_ : 0, (c & 4) ? last_ : 0)] = 0;
+      eta_[((c & 4) ? last_ : 0) * size_t(n_) * n_ + ((c & 2) ? last_ : 0) * size_t(n_) +
+           ((c & 1) ? last_ : 0)] = 0;
     size_t done = 0;
     for (int h = 0; h < k_; ++h) {
       for (DiamondKind kind : {DiamondKind::kEdge, DiamondKind::kFace, DiamondKind::kCube}) {
@@ -101,8 +103,8 @@ class HierarchyBuilder {
       start[a] = kOdd[a] ? u : 0;
       count[a] = kOdd[a] ? (last_ >> (h + 1)) : (last_ >> (h + 1)) + 1;
     }
-    const float* f = hier_.samples_.data();
-    float* eta = hier_.eta_.data();
+    const float* f = f_;
+    float* eta = eta_;
     const ptrdiff_t sy = n_, sz = static_cast<ptrdiff_t>(n_) * n_;
     const ptrdiff_t stride[3] = {1, sy, sz};
 
@@ -174,28 +176,76 @@ class HierarchyBuilder {
     return worst;
   }
 
-  Hierarchy& hier_;
+  const float* f_;
+  float* eta_;
   int k_, n_, last_;
 };
+
+template <typename F>
+void Hierarchy::ForEachRow(F&& f) const {
+  // Rows of 8 points along x inside one brick line up with 8 linear samples.
+  tbb::parallel_for(tbb::blocked_range<int>(0, n_), [&](const tbb::blocked_range<int>& r) {
+    for (int z = r.begin(); z != r.end(); ++z)
+      for (int y = 0; y < n_; ++y) f(y, z, (size_t(z) * n_ + y) * n_);
+  });
+}
+
+std::vector<float> Hierarchy::LinearSamples() const {
+  std::vector<float> out(point_count());
+  ForEachRow([&](int y, int z, size_t row) {
+    for (int x = 0; x < n_; ++x) out[row + x] = data_[2 * index(x, y, z)];
+  });
+  return out;
+}
+
+std::vector<float> Hierarchy::LinearEta() const {
+  std::vector<float> out(point_count());
+  ForEachRow([&](int y, int z, size_t row) {
+    for (int x = 0; x < n_; ++x) out[row + x] = data_[2 * index(x, y, z) + 1];
+  });
+  return out;
+}
 
 absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
                                                UninitializedVector<float> eta) {
   const size_t n = static_cast<size_t>(samples.n);
-  if (samples.k < 1 || samples.n != (1 << samples.k) + 1 || samples.values.size() != n * n * n)
+  if (samples.k < 1 || samples.k > 12 || samples.n != (1 << samples.k) + 1 ||
+      samples.values.size() != n * n * n)
     return absl::InvalidArgumentError("hierarchy: samples are not a (2^k+1)^3 cube");
-  if (!eta.empty() && eta.size() != samples.values.size())
+  if (eta.size() != samples.values.size())
     return absl::InvalidArgumentError("hierarchy: eta size does not match the samples");
   auto h = std::make_shared<Hierarchy>();
   h->k_ = samples.k;
   h->n_ = samples.n;
+  h->nb_ = (n + Hierarchy::kBrickMask) >> Hierarchy::kBrickLog2;
   h->data_dims_ = samples.data_dims;
-  h->samples_ = std::move(samples.values);
-  h->eta_ = std::move(eta);
+  // Points of partial bricks beyond the cube are never read; zero them all the same so the
+  // store is deterministic (the pages are touched in parallel below either way).
+  h->data_.resize(2 * h->nb_ * h->nb_ * h->nb_ << (3 * Hierarchy::kBrickLog2));
+  float* data = h->data_.data();
+  const size_t nb = h->nb_;
+  const size_t brick_floats = 2u << (3 * Hierarchy::kBrickLog2);
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, nb * nb * nb), [&](const tbb::blocked_range<size_t>& r) {
+        std::fill(data + r.begin() * brick_floats, data + r.end() * brick_floats, 0.0f);
+      });
+  const Hierarchy& hc = *h;
+  hc.ForEachRow([&](int y, int z, size_t row) {
+    for (int x = 0; x < samples.n; ++x) {
+      const size_t i = 2 * hc.index(x, y, z);
+      data[i] = samples.values[row + x];
+      data[i + 1] = eta[row + x];
+    }
+  });
   return HierarchyPtr(std::move(h));
 }
 
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options) {
+  const size_t n = static_cast<size_t>(samples.n);
+  if (samples.k < 1 || samples.k > 12 || samples.n != (1 << samples.k) + 1 ||
+      samples.values.size() != n * n * n)
+    return absl::InvalidArgumentError("hierarchy: samples are not a (2^k+1)^3 cube");
   const bool finite = tbb::parallel_reduce(
       tbb::blocked_range<size_t>(0, samples.values.size()), true,
       [&](const tbb::blocked_range<size_t>& r, bool ok) {
@@ -204,13 +254,11 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
       },
       [](bool a, bool b) { return a && b; });
   if (!finite) return absl::InvalidArgumentError("hierarchy: non-finite sample");
-  ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built,
-                             AssembleHierarchy(std::move(samples), UninitializedVector<float>()));
-  auto* h = const_cast<Hierarchy*>(built.get());
-  HierarchyBuilder builder(h);
+  UninitializedVector<float> eta(samples.values.size());
   tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+  HierarchyBuilder builder(samples.k, samples.values.data(), eta.data());
   arena.execute([&] { builder.Run(options); });
-  return built;
+  return AssembleHierarchy(std::move(samples), std::move(eta));
 }
 
 }  // namespace isostream

@@ -28,27 +28,44 @@ class Hierarchy {
   int k() const { return k_; }
   int n() const { return n_; }  // points per axis, 2^k + 1
   const std::array<int, 3>& data_dims() const { return data_dims_; }
+  size_t point_count() const { return size_t(n_) * n_ * n_; }
 
-  size_t index(int x, int y, int z) const { return (static_cast<size_t>(z) * n_ + y) * n_ + x; }
-  const float* samples() const { return samples_.data(); }
-  const float* eta() const { return eta_.data(); }
-  float sample(int x, int y, int z) const { return samples_[index(x, y, z)]; }
-  float eta(int x, int y, int z) const { return eta_[index(x, y, z)]; }
-  size_t point_count() const { return samples_.size(); }
+  // Storage: sample and eta interleaved, in bricks of 8x8x8 points (4 KiB, one page). A
+  // traversal reads a tetrahedron's corners and refinement vertex together, and they are
+  // close in space: bricks keep them on the same page and mostly in the same cache lines,
+  // where a linear layout puts every z step a whole plane away.
+  size_t index(int x, int y, int z) const {
+    const size_t brick =
+        (size_t(z >> kBrickLog2) * nb_ + size_t(y >> kBrickLog2)) * nb_ + size_t(x >> kBrickLog2);
+    return (brick << (3 * kBrickLog2)) | (size_t(z & kBrickMask) << (2 * kBrickLog2)) |
+           (size_t(y & kBrickMask) << kBrickLog2) | size_t(x & kBrickMask);
+  }
+  const float* pairs() const { return data_.data(); }  // [2 i] sample, [2 i + 1] eta
+  float sample(int x, int y, int z) const { return data_[2 * index(x, y, z)]; }
+  float eta(int x, int y, int z) const { return data_[2 * index(x, y, z) + 1]; }
 
-  // Memory the hierarchy adds on top of the samples (eta), and in all.
-  size_t eta_bytes() const { return eta_.size() * sizeof(float); }
-  size_t total_bytes() const { return eta_bytes() + samples_.size() * sizeof(float); }
+  // Linear (x fastest) copies, for the cache file and for tests.
+  std::vector<float> LinearSamples() const;
+  std::vector<float> LinearEta() const;
+
+  // Memory: eta's share and the whole interleaved store (bricks pad n up to a multiple of 8).
+  size_t eta_bytes() const { return data_.size() / 2 * sizeof(float); }
+  size_t total_bytes() const { return data_.size() * sizeof(float); }
+
+  static constexpr int kBrickLog2 = 3;
+  static constexpr int kBrickMask = (1 << kBrickLog2) - 1;
 
  private:
-  friend class HierarchyBuilder;
-  friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(PaddedSamples samples,
-                                                                            UninitializedVector<float> eta);
+  friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(
+      PaddedSamples samples, UninitializedVector<float> eta);
+  template <typename F>
+  void ForEachRow(F&& f) const;
+
   int k_ = 0;
   int n_ = 0;
+  size_t nb_ = 0;  // bricks per axis
   std::array<int, 3> data_dims_{0, 0, 0};
-  std::vector<float> samples_;
-  UninitializedVector<float> eta_;
+  UninitializedVector<float> data_;
 };
 
 using HierarchyPtr = std::shared_ptr<const Hierarchy>;
@@ -63,7 +80,9 @@ struct HierarchyBuildOptions {
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options = {});
 
-// Wraps a hierarchy whose eta was computed before (the on-disk cache). Sizes must match.
-absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples, UninitializedVector<float> eta);
+// Builds the hierarchy's store from linear samples and linear eta (computed by
+// BuildHierarchy, or read from the on-disk cache). Sizes must match.
+absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
+                                               UninitializedVector<float> eta);
 
 }  // namespace isostream

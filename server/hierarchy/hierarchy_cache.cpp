@@ -92,11 +92,12 @@ bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples
     h.n = static_cast<uint32_t>(hier.n());
     for (int a = 0; a < 3; ++a) h.data_dims[a] = hier.data_dims()[a];
     h.samples_hash = samples_hash;
-    h.eta_count = hier.point_count();
-    h.eta_hash = XXH3_64bits(hier.eta(), hier.eta_bytes());
+    const std::vector<float> eta = hier.LinearEta();
+    h.eta_count = eta.size();
+    h.eta_hash = XXH3_64bits(eta.data(), eta.size() * sizeof(float));
     out.write(reinterpret_cast<const char*>(&h), sizeof(h));
-    out.write(reinterpret_cast<const char*>(hier.eta()),
-              static_cast<std::streamsize>(hier.eta_bytes()));
+    out.write(reinterpret_cast<const char*>(eta.data()),
+              static_cast<std::streamsize>(eta.size() * sizeof(float)));
     if (!out.flush()) {
       *why = "cannot write cache file " + tmp + ": " + std::strerror(errno);
       std::filesystem::remove(tmp, ec);

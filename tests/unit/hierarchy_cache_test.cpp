@@ -52,8 +52,8 @@ TEST_F(HierarchyCacheTest, MissThenHitWithIdenticalEta) {
   EXPECT_EQ(first, CacheOutcome::kMissBuilt);
   EXPECT_EQ(second, CacheOutcome::kHit);
   ASSERT_EQ(a->point_count(), b->point_count());
-  EXPECT_EQ(0, std::memcmp(a->eta(), b->eta(), a->eta_bytes()));
-  EXPECT_EQ(0, std::memcmp(a->samples(), b->samples(), a->point_count() * sizeof(float)));
+  EXPECT_EQ(a->LinearEta(), b->LinearEta());
+  EXPECT_EQ(a->LinearSamples(), b->LinearSamples());
 }
 
 TEST_F(HierarchyCacheTest, ChangedSamplesAreNotServedFromCache) {
@@ -63,7 +63,7 @@ TEST_F(HierarchyCacheTest, ChangedSamplesAreNotServedFromCache) {
   EXPECT_NE(outcome, CacheOutcome::kHit);
   auto fresh = BuildHierarchy(Samples(4, 1));
   ASSERT_TRUE(fresh.ok());
-  EXPECT_EQ(0, std::memcmp((*fresh)->eta(), b->eta(), b->eta_bytes()));
+  EXPECT_EQ((*fresh)->LinearEta(), b->LinearEta());
 }
 
 void Corrupt(const std::string& path, long offset_from_end, bool truncate) {
@@ -98,7 +98,7 @@ TEST_F(HierarchyCacheTest, CorruptTruncatedAndForeignFilesAreRebuilt) {
     }
     const HierarchyPtr h = Get(Samples(4, 0), &outcome);
     EXPECT_EQ(outcome, CacheOutcome::kInvalidRebuilt) << "variant " << variant;
-    EXPECT_EQ(0, std::memcmp((*expect)->eta(), h->eta(), h->eta_bytes())) << "variant " << variant;
+    EXPECT_EQ((*expect)->LinearEta(), h->LinearEta()) << "variant " << variant;
     Get(Samples(4, 0), &outcome);
     EXPECT_EQ(outcome, CacheOutcome::kHit) << "replaced file is good again, variant " << variant;
   }

@@ -132,7 +132,7 @@ TEST(Hierarchy, SameEtaWithOneAndTwoThreads) {
   const auto vols = TestVolumes();
   const HierarchyPtr a = Build(5, vols[2], 1), b = Build(5, vols[2], 2);
   ASSERT_EQ(a->point_count(), b->point_count());
-  EXPECT_EQ(0, std::memcmp(a->eta(), b->eta(), a->eta_bytes()));
+  EXPECT_EQ(a->LinearEta(), b->LinearEta());
 }
 
 // No hanging node: in the adaptive leaf mesh every face is shared by exactly two leaves, except
@@ -273,7 +273,7 @@ TEST(Hierarchy, EtaIsTightEnoughToMatter) {
   const HierarchyPtr lin = Build(k, {"linear", [](double x, double y, double z) {
                                        return float(0.25 * x - 0.5 * y + 0.125 * z);
                                      }});
-  for (size_t i = 0; i < lin->point_count(); ++i) ASSERT_LE(lin->eta()[i], 1e-6f);
+  for (float e : lin->LinearEta()) ASSERT_LE(e, 1e-6f);
 }
 
 TEST(Hierarchy, RejectsNonFiniteSamplesAndBadShapes) {

@@ -1,0 +1,151 @@
+// Extraction speed: sorted (back-to-front) vs --order none, 1 vs 2 threads, and an
+// extract-then-sort baseline (same traversal unsorted, then std::sort by centroid depth).
+//   build/tests/bench/bench_extract --benchmark_counters_tabular=true
+// Cases: cayley:513 iso 0 and -0.5,0,0.5; buckyball:513 iso .05,.15,.25, each at the eps that
+// gives about 1 M triangles; cayley:257 iso 0 at eps = 0.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <map>
+#include <numeric>
+
+#include <glm/geometric.hpp>
+
+#include "server/extract/extractor.h"
+#include "server/hierarchy/hierarchy.h"
+#include "server/volume/load.h"
+#include "server/volume/padding.h"
+
+namespace isostream {
+namespace {
+
+struct Scene {
+  HierarchyPtr hierarchy;
+  GridToWorld xf;
+  ExtractRequest request;  // eps already resolved
+};
+
+struct CaseSpec {
+  const char* volume;
+  std::vector<float> iso;
+  int64_t target_triangles;  // 0: use eps = 0
+};
+
+const std::vector<CaseSpec>& Cases() {
+  static const std::vector<CaseSpec> cases = {
+      {"cayley:513", {0.0f}, 1000000},
+      {"cayley:513", {-0.5f, 0.0f, 0.5f}, 1000000},
+      {"buckyball:513", {0.05f, 0.15f, 0.25f}, 1000000},
+      {"cayley:257", {0.0f}, 0},
+  };
+  return cases;
+}
+
+const Scene& GetScene(int index) {
+  static std::map<int, Scene> scenes;
+  static std::map<std::string, std::pair<HierarchyPtr, GridToWorld>> volumes;
+  auto it = scenes.find(index);
+  if (it != scenes.end()) return it->second;
+  const CaseSpec& spec = Cases()[index];
+  auto& vol = volumes[spec.volume];
+  if (!vol.first) {
+    auto volume = LoadVolume(spec.volume);
+    auto padded = PadToHierarchyDomain(**volume);
+    vol.first = *BuildHierarchy(std::move(*padded));
+    for (int a = 0; a < 3; ++a) {
+      vol.second.origin[a] = (*volume)->origin[a];
+      vol.second.spacing[a] = (*volume)->spacing[a];
+    }
+  }
+  Scene s;
+  s.hierarchy = vol.first;
+  s.xf = vol.second;
+  s.request.isovalues = spec.iso;
+  s.request.view.eye = {2.5, 1.8, 3.1};  // outside [-1,1]^3, an oblique view
+  if (spec.target_triangles > 0) {
+    ExtractRequest probe = s.request;
+    probe.budget = spec.target_triangles;
+    s.request.eps = Extract(*s.hierarchy, s.xf, probe)->stats.eps_used;
+  }
+  return scenes.emplace(index, std::move(s)).first->second;
+}
+
+void Report(benchmark::State& state, int64_t triangles) {
+  state.counters["triangles"] = double(triangles);
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(triangles) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+}
+
+// args: case, threads, sorted (1) or --order none (0)
+void BM_Extract(benchmark::State& state) {
+  const Scene& scene = GetScene(int(state.range(0)));
+  ExtractRequest r = scene.request;
+  r.threads = int(state.range(1));
+  r.order = state.range(2) ? DrawOrder::kBackToFront : DrawOrder::kNone;
+  int64_t triangles = 0;
+  for (auto _ : state) {
+    auto res = Extract(*scene.hierarchy, scene.xf, r);
+    triangles = res->stats.triangles;
+    benchmark::DoNotOptimize(res);
+  }
+  state.counters["eps"] = scene.request.eps;
+  Report(state, triangles);
+}
+
+// The baseline Gerstner's method replaces: extract unsorted, then sort triangles by the
+// distance of their centroids from the eye, farthest first.
+void BM_ExtractThenSort(benchmark::State& state) {
+  const Scene& scene = GetScene(int(state.range(0)));
+  ExtractRequest r = scene.request;
+  r.threads = int(state.range(1));
+  r.order = DrawOrder::kNone;
+  int64_t triangles = 0;
+  for (auto _ : state) {
+    auto res = Extract(*scene.hierarchy, scene.xf, r);
+    OrderedMesh& m = res->mesh;
+    const size_t t = m.triangle_count();
+    std::vector<float> depth(t);
+    const glm::vec3 eye(r.view.eye);
+    for (size_t i = 0; i < t; ++i) {
+      glm::vec3 c(0.0f);
+      for (int j = 0; j < 3; ++j) {
+        const float* p = &m.positions[3 * size_t(m.triangles[3 * i + j])];
+        c += glm::vec3(p[0], p[1], p[2]);
+      }
+      const glm::vec3 d = c / 3.0f - eye;
+      depth[i] = glm::dot(d, d);
+    }
+    std::vector<uint32_t> order(t);
+    std::iota(order.begin(), order.end(), 0u);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return depth[a] > depth[b]; });
+    std::vector<uint32_t> tris(3 * t);
+    std::vector<uint8_t> surface(t);
+    for (size_t i = 0; i < t; ++i) {
+      std::copy_n(&m.triangles[3 * size_t(order[i])], 3, &tris[3 * i]);
+      surface[i] = m.surface[order[i]];
+    }
+    m.triangles.swap(tris);
+    m.surface.swap(surface);
+    triangles = int64_t(t);
+    benchmark::DoNotOptimize(m);
+  }
+  Report(state, triangles);
+}
+
+void Args(benchmark::internal::Benchmark* b) {
+  for (int c = 0; c < 4; ++c)
+    for (int threads : {1, 2})
+      for (int sorted : {1, 0}) b->Args({c, threads, sorted});
+}
+BENCHMARK(BM_Extract)->Apply(Args)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
+BENCHMARK(BM_ExtractThenSort)
+    ->Args({0, 1})
+    ->Args({2, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(1.0);
+
+}  // namespace
+}  // namespace isostream
+
+BENCHMARK_MAIN();
