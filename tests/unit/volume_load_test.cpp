@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
@@ -23,14 +24,25 @@ namespace {
 // ------------------------------------------------------------------------------------------------
 // Files
 
+// One scratch directory per test process, removed when the process's tests finish.
+std::string* scratch_dir = nullptr;
+
+class ScratchCleanup : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    if (scratch_dir != nullptr) std::filesystem::remove_all(*scratch_dir);
+  }
+};
+::testing::Environment* const kScratchCleanup =
+    ::testing::AddGlobalTestEnvironment(new ScratchCleanup);
+
 const std::string& ScratchDir() {
-  static const std::string dir = [] {
+  if (scratch_dir == nullptr) {
     std::string pattern = ::testing::TempDir() + "/isostream_volume_XXXXXX";
-    const char* made = mkdtemp(pattern.data());
-    EXPECT_NE(made, nullptr);
-    return pattern;
-  }();
-  return dir;
+    EXPECT_NE(mkdtemp(pattern.data()), nullptr) << pattern;
+    scratch_dir = new std::string(pattern);
+  }
+  return *scratch_dir;
 }
 
 std::string ScratchPath(const std::string& name) { return ScratchDir() + "/" + name; }
