@@ -1,0 +1,37 @@
+// Internal to shared/: the vertex re-indexing both chunk codecs and the GLB writer share, so a
+// triangle range gets the same local vertex numbering whichever codec carries it.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "shared/ordered_mesh.h"
+#include "shared/status.h"
+
+namespace isostream::internal {
+
+// The triangles of a range with their own vertex arrays. Local vertices are numbered in order of
+// first use by the range's corners. A local vertex belongs to exactly one surface: a mesh vertex
+// used by triangles of two surfaces becomes two local vertices, so per-vertex encodings of the
+// surface (Draco attributes, glTF COLOR_0) stay exact.
+struct GatheredChunk {
+  std::vector<float> positions;         // 3 per local vertex
+  std::vector<float> normals;           // 3 per local vertex; empty when the mesh has none
+  std::vector<uint8_t> vertex_surface;  // 1 per local vertex
+  std::vector<uint32_t> triangles;      // 3 local indices per triangle, in range order
+  std::vector<uint8_t> surface;         // 1 per triangle
+
+  size_t vertex_count() const { return vertex_surface.size(); }
+  size_t triangle_count() const { return surface.size(); }
+};
+
+// Fills `out` (reusing its capacity) with triangles [first_triangle, first_triangle +
+// triangle_count) of `mesh`. Validates what it reads: array sizes, the range, indices, surface
+// indices and the finiteness of gathered positions and normals; returns InvalidArgument or
+// OutOfRange naming the offending triangle or vertex. Cost O(triangle_count), plus O(vertex
+// count of the mesh) when the range is large enough that a dense lookup table pays off.
+absl::Status GatherTriangleRange(const OrderedMesh& mesh, size_t first_triangle,
+                                 size_t triangle_count, GatheredChunk* out);
+
+}  // namespace isostream::internal
