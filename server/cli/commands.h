@@ -8,5 +8,6 @@ namespace isostream::cli {
 // Each returns the subcommand; its callback sets *exit_code.
 CLI::App* AddInfoCommand(CLI::App& app, int* exit_code);
 CLI::App* AddTetsCommand(CLI::App& app, int* exit_code);
+CLI::App* AddExtractCommand(CLI::App& app, int* exit_code);
 
 }  // namespace isostream::cli

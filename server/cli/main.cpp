@@ -8,6 +8,7 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   isostream::cli::AddInfoCommand(app, &exit_code);
   isostream::cli::AddTetsCommand(app, &exit_code);
+  isostream::cli::AddExtractCommand(app, &exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

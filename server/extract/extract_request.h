@@ -8,16 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "server/hierarchy/hierarchy.h"
 #include "shared/ordered_mesh.h"
 #include "shared/status.h"
 
 namespace isostream {
-
-// Maps grid points of the hierarchy cube to world space: world = origin + spacing * grid.
-struct GridToWorld {
-  glm::dvec3 origin{0.0};
-  glm::dvec3 spacing{1.0};
-};
 
 enum class DrawOrder : uint8_t {
   kBackToFront,  // Gerstner §4: initial tets by BSP, children by separating plane, components

@@ -66,8 +66,10 @@ class HierarchyBuilder {
           done += Pass(h, mask, kind);
         }
       }
-      if (options.progress) options.progress(static_cast<double>(done) / total);
+      if (options.progress && total > (size_t{1} << 24))
+        options.progress(std::min(0.99, static_cast<double>(done) / total));
     }
+    if (options.progress && total > (size_t{1} << 24)) options.progress(1.0);
   }
 
  private:

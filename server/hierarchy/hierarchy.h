@@ -14,6 +14,7 @@
 #include <array>
 #include <cstddef>
 #include <functional>
+#include <glm/vec3.hpp>
 #include <memory>
 #include <vector>
 
@@ -22,6 +23,12 @@
 #include "shared/uninitialized_vector.h"
 
 namespace isostream {
+
+// Maps grid points of the hierarchy cube to world space: world = origin + spacing * grid.
+struct GridToWorld {
+  glm::dvec3 origin{0.0};
+  glm::dvec3 spacing{1.0};
+};
 
 class Hierarchy {
  public:

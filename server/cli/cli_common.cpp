@@ -1,0 +1,113 @@
+#include "server/cli/cli_common.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <glm/geometric.hpp>
+
+namespace isostream::cli {
+
+void AddVolumeOptions(CLI::App* cmd, VolumeArgs* args) {
+  cmd->add_option("--volume", args->volume,
+                  "generator (cayley:N, buckyball:N, sphere:N, shells:N, noise:N[:SEED]), "
+                  "a .vdb/.nii/.nii.gz file, or raw:PATH:NXxNYxNZ:TYPE[:le|be]")
+      ->required();
+  cmd->add_option("--threads", args->threads, "worker threads (0: all cores)")
+      ->check(CLI::Range(0, 1024));
+  cmd->add_option("--cache-dir", args->cache_dir, "hierarchy cache directory");
+  cmd->add_flag("--no-cache", args->no_cache, "always rebuild the hierarchy, store nothing");
+  cmd->add_option("--max-dim", args->max_dim, "largest accepted samples per axis")
+      ->check(CLI::Range(2, 4097));
+}
+
+absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args) {
+  VolumeLimits limits;
+  limits.max_dim = args.max_dim;
+  HierarchyCacheOptions cache;
+  if (!args.no_cache) cache.dir = args.cache_dir;
+  HierarchyBuildOptions build;
+  build.threads = args.threads;
+  // Progress on stderr; BuildHierarchy reports only for builds over 16 M points.
+  {
+    auto last = std::make_shared<int>(-1);
+    build.progress = [last](double f) {
+      const int percent = int(100 * f);
+      if (percent == *last) return;
+      *last = percent;
+      if (percent < 100)
+        std::fprintf(stderr, "\rbuilding hierarchy: %3d%%", percent);
+      else
+        std::fprintf(stderr, "\r                         \r");
+      std::fflush(stderr);
+    };
+  }
+  return PrepareVolume(args.volume, limits, cache, build);
+}
+
+void AddViewOptions(CLI::App* cmd, ViewArgs* args) {
+  cmd->add_option("--iso", args->iso, "isovalues, comma separated (at most 16)")->required();
+  auto* eps = cmd->add_option("--eps", args->eps, "error bound in data units (0: full resolution)");
+  auto* budget =
+      cmd->add_option("--budget", args->budget, "triangle budget: find the smallest eps that fits");
+  eps->excludes(budget);
+  auto* eye = cmd->add_option("--eye", args->eye, "perspective eye x,y,z (world units)");
+  auto* dir = cmd->add_option("--view-dir", args->view_dir, "orthographic view direction x,y,z");
+  eye->excludes(dir);
+  cmd->add_option("--order", args->order, "back-to-front (default) or none")
+      ->check(CLI::IsMember({"back-to-front", "none"}));
+  cmd->add_option("--normals", args->normals, "smooth (default) or flat")
+      ->check(CLI::IsMember({"smooth", "flat"}));
+}
+
+absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what) {
+  std::vector<double> out;
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t end = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, end - start);
+    char* stop = nullptr;
+    const double v = std::strtod(item.c_str(), &stop);
+    if (item.empty() || stop != item.c_str() + item.size() || !std::isfinite(v))
+      return absl::InvalidArgumentError(std::string(what) + ": '" + item + "' is not a number");
+    out.push_back(v);
+    start = end + 1;
+  }
+  return out;
+}
+
+absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& volume) {
+  ExtractRequest r;
+  ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> iso, ParseNumbers(args.iso, "--iso"));
+  for (double v : iso) r.isovalues.push_back(float(v));
+  if (args.budget != 0) {
+    if (args.budget < 0) return absl::InvalidArgumentError("--budget must be positive");
+    r.budget = args.budget;
+  } else if (args.eps < 0 || !std::isfinite(args.eps)) {
+    return absl::InvalidArgumentError("give --eps E (>= 0, data units) or --budget N");
+  } else {
+    r.eps = args.eps;
+  }
+  if (!args.view_dir.empty()) {
+    ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> d, ParseNumbers(args.view_dir, "--view-dir"));
+    if (d.size() != 3) return absl::InvalidArgumentError("--view-dir needs x,y,z");
+    r.view.orthographic = true;
+    r.view.direction = {d[0], d[1], d[2]};
+  } else if (!args.eye.empty()) {
+    ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> e, ParseNumbers(args.eye, "--eye"));
+    if (e.size() != 3) return absl::InvalidArgumentError("--eye needs x,y,z");
+    r.view.eye = {e[0], e[1], e[2]};
+  } else {
+    glm::dvec3 lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = volume.origin[a];
+      hi[a] = volume.origin[a] + volume.spacing[a] * (volume.dims[a] - 1);
+    }
+    const glm::dvec3 centre = 0.5 * (lo + hi);
+    r.view.eye = centre + 1.6 * glm::length(hi - lo) * glm::normalize(glm::dvec3(0.8, 0.6, 1.0));
+  }
+  r.order = args.order == "none" ? DrawOrder::kNone : DrawOrder::kBackToFront;
+  r.normals = args.normals == "flat" ? NormalMode::kFlat : NormalMode::kSmooth;
+  return r;
+}
+
+}  // namespace isostream::cli

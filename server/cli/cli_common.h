@@ -1,0 +1,43 @@
+// Options and parsing shared by the subcommands: the volume/cache flags, vectors like
+// "x,y,z", and the view flags that `extract` and (later) `fetch` take alike.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "server/extract/extract_request.h"
+#include "server/hierarchy/prepared_volume.h"
+
+namespace isostream::cli {
+
+struct VolumeArgs {
+  std::string volume;
+  std::string cache_dir = DefaultCacheDir();
+  bool no_cache = false;
+  int threads = 0;
+  int max_dim = VolumeLimits{}.max_dim;
+};
+void AddVolumeOptions(CLI::App* cmd, VolumeArgs* args);
+
+// Loads, pads and builds (or reads the cached) hierarchy, with a progress line on big volumes.
+absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args);
+
+struct ViewArgs {
+  std::string iso;
+  double eps = -1;
+  int64_t budget = 0;
+  std::string eye, view_dir;
+  std::string order = "back-to-front";
+  std::string normals = "smooth";
+};
+void AddViewOptions(CLI::App* cmd, ViewArgs* args);
+
+// Turns the flags into a request; the default view looks at the volume's centre from outside,
+// along an oblique diagonal, when neither --eye nor --view-dir is given.
+absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& volume);
+
+absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what);
+
+}  // namespace isostream::cli

@@ -1,0 +1,38 @@
+#include "server/hierarchy/prepared_volume.h"
+
+#include <chrono>
+
+#include "server/volume/load.h"
+#include "server/volume/padding.h"
+
+namespace isostream {
+namespace {
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+}  // namespace
+
+absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const VolumeLimits& limits,
+                                             const HierarchyCacheOptions& cache,
+                                             const HierarchyBuildOptions& build) {
+  PreparedVolume p;
+  auto t0 = std::chrono::steady_clock::now();
+  ISOSTREAM_ASSIGN_OR_RETURN(p.volume, LoadVolume(spec, limits));
+  p.load_s = Seconds(t0);
+  t0 = std::chrono::steady_clock::now();
+  ISOSTREAM_ASSIGN_OR_RETURN(PaddedSamples padded, PadToHierarchyDomain(*p.volume));
+  p.pad_s = Seconds(t0);
+  t0 = std::chrono::steady_clock::now();
+  ISOSTREAM_ASSIGN_OR_RETURN(
+      p.hierarchy, LoadOrBuildHierarchy(std::move(padded), cache, build, &p.cache, &p.cache_note));
+  p.hierarchy_s = Seconds(t0);
+  for (int a = 0; a < 3; ++a) {
+    p.grid_to_world.origin[a] = p.volume->origin[a];
+    p.grid_to_world.spacing[a] = p.volume->spacing[a];
+  }
+  return p;
+}
+
+}  // namespace isostream
