@@ -573,7 +573,8 @@ TEST_F(MalformedChunks, DracoPayloadThatLosesOrderIsRejected) {
 
 // ---------------------------------------------------------------------------------------------
 // Size and speed report: bytes per triangle on a smooth closed surface, in the order it was
-// generated (latitude bands) and sorted back to front along z, the order a frame arrives in.
+// generated (latitude bands around z) and sorted back to front along x, across the bands, like
+// a frame viewed from the side.
 // ISOSTREAM_CODEC_REPORT_TRIANGLES sets the mesh size (default 100k).
 
 struct Measured {
@@ -609,7 +610,7 @@ TEST(MeshCodecReport, BytesPerTriangleOnSphere) {
     target = std::strtoull(env, nullptr, 10);
   }
   const OrderedMesh banded = MakeSphere(target);
-  const OrderedMesh depth = SortedByDepth(banded);
+  const OrderedMesh depth = SortedByDepth(banded, 0);
   for (const auto& [name, mesh] : {std::pair{"band order", &banded}, {"depth order", &depth}}) {
     const size_t count = mesh->triangle_count();
     CodecOptions sequential;

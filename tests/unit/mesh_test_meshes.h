@@ -101,11 +101,11 @@ inline OrderedMesh Shuffled(const OrderedMesh& mesh, uint32_t seed) {
   return PermuteTriangles(mesh, order);
 }
 
-// Back to front along +z: the kind of order the server produces for a view down the z axis.
-inline OrderedMesh SortedByDepth(const OrderedMesh& mesh) {
+// Back to front along +`axis`: the kind of order the server produces for a view down that axis.
+inline OrderedMesh SortedByDepth(const OrderedMesh& mesh, int axis) {
   std::vector<float> depth(mesh.triangle_count());
   for (size_t t = 0; t < depth.size(); ++t) {
-    for (int c = 0; c < 3; ++c) depth[t] += mesh.positions[3 * mesh.triangles[3 * t + c] + 2];
+    for (int c = 0; c < 3; ++c) depth[t] += mesh.positions[3 * mesh.triangles[3 * t + c] + axis];
   }
   std::vector<size_t> order(depth.size());
   std::iota(order.begin(), order.end(), size_t{0});
