@@ -86,8 +86,9 @@ struct CodecOptions {
   // Octahedral normal quantization bits, 2..30; 0 stores float32 normals losslessly.
   int normal_bits = 10;
   // Entropy-code the index deltas (Draco's "compress_connectivity" for sequential encoding).
-  // About half the size of plain indices for meshes in spatially coherent order; costs about
-  // twice the encode time. Measured figures: see the report of tests/unit/mesh_codec_test.cpp.
+  // Measured on a 1M-triangle sphere (MeshCodecReport in tests/unit/mesh_codec_test.cpp):
+  // 2.2 instead of 10.3 bytes/triangle in generation order, 7.7 instead of 12.2 when sorted
+  // back to front across its bands; encode and decode times are about the same either way.
   bool compress_connectivity = true;
   // When set, positions are quantized on this fixed grid instead of each chunk's own bounding
   // cube, so a vertex that appears in two chunks of a frame (or in consecutive frames) decodes
