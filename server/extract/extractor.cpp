@@ -172,27 +172,51 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
 
   double eps = r.eps;
   if (r.budget > 0) {
-    // Triangle count never grows with eps (saturated eta nests the meshes), so bisect on a
-    // log scale between eps = 0 and the root's eta, each probe a count that stops past the
-    // budget. Ends at the smallest probed eps whose count fits.
+    // Triangle count never grows with eps (saturated eta nests the meshes), so the smallest
+    // eps that fits is bracketed and the bracket shrunk until its ends are within 1% of each
+    // other: then 0.99 eps no longer fits. Probes count triangles only and stop at 4x the
+    // budget. Steps are regula falsi on log(count) over log(eps) (counts of smooth surfaces
+    // follow a power law in eps), with the Illinois fix so a stale end cannot stall it;
+    // before a "too many" end is known, the step extrapolates with slope -1.
     auto t0 = std::chrono::steady_clock::now();
     const int half = (h.n() - 1) / 2;
-    double hi = double(h.eta(half, half, half)) * 1.0001 + 1e-30;
-    arena.execute([&] {
-      const int64_t at_zero = CountAt(MakeContext(h, xf, r, 0.0), r.budget);
+    const int64_t limit = 4 * r.budget;
+    auto count_at = [&](double e) {
       ++st.budget_passes;
-      if (at_zero <= r.budget) {
-        eps = 0.0;
-        return;
+      return CountAt(MakeContext(h, xf, r, e), limit);
+    };
+    arena.execute([&] {
+      const double x_root = std::log(double(h.eta(half, half, half)) * 1.0001 + 1e-30);
+      double x_hi = x_root;
+      double y_hi = std::log(double(std::max<int64_t>(count_at(std::exp(x_hi)), 1)));
+      double x_lo = 0, y_lo = 0;
+      bool have_lo = false;
+      int last_moved = 0, repeats = 0;
+      const double target = std::log(double(r.budget));
+      for (int i = 0; i < 60; ++i) {
+        if (have_lo && x_hi - x_lo < std::log(1.01)) break;
+        double x;
+        if (!have_lo) {
+          if (x_hi < x_root - 35) break;  // fits at ~1e-15 of the root's eta: use eps = 0
+          x = std::max(x_hi - 1.05 * std::max(target - y_hi, 0.1), x_root - 36);
+        } else {
+          const double w = x_hi - x_lo;
+          x = y_lo > y_hi ? x_lo + (y_lo - target) / (y_lo - y_hi) * w : x_lo + 0.5 * w;
+          x = std::clamp(x, x_lo + 0.02 * w, x_hi - 0.02 * w);
+        }
+        const int64_t count = count_at(std::exp(x));
+        const int moved = count <= r.budget ? 1 : -1;
+        repeats = moved == last_moved ? repeats + 1 : 0;
+        last_moved = moved;
+        if (moved > 0) {
+          x_hi = x, y_hi = std::log(double(std::max<int64_t>(count, 1)));
+          if (repeats > 0 && have_lo) y_lo = target + 0.5 * (y_lo - target);  // Illinois
+        } else {
+          x_lo = x, y_lo = std::log(double(count)), have_lo = true;
+          if (repeats > 0) y_hi = target + 0.5 * (y_hi - target);
+        }
       }
-      double lo = hi * 1e-9;
-      for (int i = 0; i < 40 && hi / lo > 1.002; ++i) {
-        const double mid = std::sqrt(lo * hi);
-        const int64_t count = CountAt(MakeContext(h, xf, r, mid), r.budget);
-        ++st.budget_passes;
-        (count <= r.budget ? hi : lo) = mid;
-      }
-      eps = hi;
+      eps = have_lo ? std::exp(x_hi) : (count_at(0.0) <= r.budget ? 0.0 : std::exp(x_hi));
     });
     st.budget_ms = Ms(t0);
   }
