@@ -1,10 +1,10 @@
 // Drives the traversal (traversal.h): validation, the split into subtrees, parallel
 // extraction, the ordered join, and the eps search for a triangle budget.
 //
-// Parallel output follows the count -> prefix sum -> fill pattern: subtrees are cut from the
-// top of the tree in draw order, extracted independently, then concatenated in that order, so
-// the result is the single-thread result whatever the thread count. Vertices on a subtree's
-// boundary faces are merged by edge key in the join.
+// Parallel output: subtrees are cut from the top of the tree in draw order, extracted
+// independently, and appended in that order as soon as each prefix is complete, so the result
+// is the single-thread result whatever the thread count, and an observer sees the farthest
+// triangles first. Vertices on a subtree's boundary faces are merged by edge key on append.
 #include "server/extract/extractor.h"
 
 #include <tbb/enumerable_thread_specific.h>
@@ -17,6 +17,7 @@
 #include <cmath>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
+#include <mutex>
 #include <numeric>
 #include <unordered_map>
 
@@ -163,7 +164,7 @@ absl::StatusOr<int64_t> CountTriangles(const Hierarchy& h, const GridToWorld& xf
 }
 
 absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
-                                      const ExtractRequest& r) {
+                                      const ExtractRequest& r, const ExtractObserver* observer) {
   ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
   const auto t_start = std::chrono::steady_clock::now();
   ExtractResult result;
@@ -228,64 +229,84 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   st.split_ms = Ms(t0);
   st.subtrees = int(items.size());
 
-  // Extract every subtree into its own buffers.
+  // Extract every subtree into its own buffers, in parallel. As soon as a prefix of subtrees
+  // (in draw order) is complete it is appended to the result under a lock, so an observer can
+  // ship the farthest triangles while the nearer ones are still being extracted. Appending in
+  // order also settles vertex sharing across subtrees: a vertex on a subtree's boundary faces
+  // is looked up by edge key, and the first occurrence in draw order keeps its index.
   t0 = std::chrono::steady_clock::now();
   std::vector<SubtreeMesh> parts(items.size());
+  std::vector<char> done(items.size(), 0);
+  size_t next = 0;
+  std::mutex mu;
+  std::unordered_map<uint64_t, uint32_t> boundary_ids;
+  std::vector<uint32_t> to_global;
+  std::atomic<bool> cancelled{false};
+  OrderedMesh& m = result.mesh;
+  double join_ms = 0;
+
+  auto append = [&](SubtreeMesh& part) {
+    const auto tj = std::chrono::steady_clock::now();
+    const OrderedMesh& p = part.mesh;
+    to_global.assign(p.vertex_count(), 0);
+    std::vector<char>& shared = part.shared_scratch;
+    shared.assign(p.vertex_count(), 0);
+    for (const auto& [local, key] : part.boundary) {
+      auto [it, inserted] = boundary_ids.emplace(key, 0);
+      if (!inserted) {
+        to_global[local] = it->second;
+        shared[local] = 1;
+      } else {
+        it->second = uint32_t(m.vertex_count() + local);  // fixed up below
+        shared[local] = 2;
+      }
+    }
+    // Copy the vertices this part owns; boundary ids issued above are corrected to the
+    // compacted positions.
+    size_t owned = 0;
+    for (char c : shared) owned += c != 1;
+    size_t out = m.vertex_count();
+    m.positions.resize(3 * (out + owned));
+    m.normals.resize(3 * (out + owned));
+    for (size_t v = 0; v < p.vertex_count(); ++v) {
+      if (shared[v] == 1) continue;
+      to_global[v] = uint32_t(out);
+      std::copy_n(&p.positions[3 * v], 3, &m.positions[3 * out]);
+      std::copy_n(&p.normals[3 * v], 3, &m.normals[3 * out]);
+      ++out;
+    }
+    for (const auto& [local, key] : part.boundary)
+      if (shared[local] == 2) boundary_ids[key] = to_global[local];
+    const size_t first = m.triangle_count();
+    const size_t tri_base = m.triangles.size();
+    m.triangles.resize(tri_base + p.triangles.size());
+    uint32_t* tri = m.triangles.data() + tri_base;
+    for (size_t j = 0; j < p.triangles.size(); ++j) tri[j] = to_global[p.triangles[j]];
+    m.surface.insert(m.surface.end(), p.surface.begin(), p.surface.end());
+    st.tets_visited += part.visited;
+    st.leaves += part.leaves;
+    part.release();
+    join_ms += Ms(tj);
+    if (observer && observer->on_ready) observer->on_ready(m, first, m.triangle_count());
+  };
+
   arena.execute([&] {
     tbb::enumerable_thread_specific<Scratch> scratch;
     tbb::parallel_for(size_t(0), items.size(), [&](size_t i) {
+      if (observer && observer->cancel && observer->cancel->load(std::memory_order_relaxed)) {
+        cancelled = true;
+        return;
+      }
       Traverser<true> t(c, &scratch.local().table, &parts[i]);
       t.Run(items[i]);
+      std::lock_guard<std::mutex> lock(mu);
+      done[i] = 1;
+      while (next < items.size() && done[next] && !cancelled) append(parts[next++]);
     });
   });
-  st.extract_ms = Ms(t0);
-
-  // Join: prefix sums, one allocation, disjoint parallel copies in draw order.
-  t0 = std::chrono::steady_clock::now();
-  std::vector<size_t> vbase(parts.size() + 1, 0), tbase(parts.size() + 1, 0);
-  for (size_t i = 0; i < parts.size(); ++i) {
-    vbase[i + 1] = vbase[i] + parts[i].mesh.vertex_count();
-    tbase[i + 1] = tbase[i] + parts[i].mesh.triangle_count();
-    st.tets_visited += parts[i].visited;
-    st.leaves += parts[i].leaves;
-  }
-  OrderedMesh& m = result.mesh;
-  m.positions.resize(3 * vbase.back());
-  m.normals.resize(3 * vbase.back());
-  m.triangles.resize(3 * tbase.back());
-  m.surface.resize(tbase.back());
-  // Boundary vertices: the first occurrence of an edge key in draw order keeps its id.
-  std::vector<uint32_t> remap;
-  {
-    std::unordered_map<uint64_t, uint32_t> first;
-    for (size_t i = 0; i < parts.size(); ++i)
-      for (const auto& [local, key] : parts[i].boundary) {
-        const uint32_t global = uint32_t(vbase[i] + local);
-        auto [it, inserted] = first.emplace(key, global);
-        if (!inserted) {
-          if (remap.empty()) {
-            remap.resize(vbase.back());
-            std::iota(remap.begin(), remap.end(), 0u);
-          }
-          remap[global] = it->second;
-        }
-      }
-  }
-  arena.execute([&] {
-    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
-      const OrderedMesh& p = parts[i].mesh;
-      std::copy(p.positions.begin(), p.positions.end(), m.positions.begin() + 3 * vbase[i]);
-      std::copy(p.normals.begin(), p.normals.end(), m.normals.begin() + 3 * vbase[i]);
-      std::copy(p.surface.begin(), p.surface.end(), m.surface.begin() + tbase[i]);
-      uint32_t* out = m.triangles.data() + 3 * tbase[i];
-      const uint32_t base = uint32_t(vbase[i]);
-      for (size_t j = 0; j < p.triangles.size(); ++j) {
-        const uint32_t g = p.triangles[j] + base;
-        out[j] = remap.empty() ? g : remap[g];
-      }
-    });
-  });
-  st.join_ms = Ms(t0);
+  if (cancelled) return absl::CancelledError("extraction cancelled");
+  st.extract_ms = Ms(t0) - join_ms;
+  st.join_ms = join_ms;
 
   st.triangles = int64_t(m.triangle_count());
   st.vertices = int64_t(m.vertex_count());

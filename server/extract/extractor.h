@@ -8,6 +8,9 @@
 // same for any thread count. Cost follows the output: subtrees no isovalue can meet are skipped.
 #pragma once
 
+#include <atomic>
+#include <functional>
+
 #include "server/extract/extract_request.h"
 #include "server/hierarchy/hierarchy.h"
 #include "shared/ordered_mesh.h"
@@ -20,9 +23,20 @@ struct ExtractResult {
   ExtractStats stats;
 };
 
+// Watches an extraction as it runs, for streaming and for cancelling.
+struct ExtractObserver {
+  // Called as the mesh grows, in draw order: triangles [first, end) of `mesh`, and every
+  // vertex they use, are final. Calls come one at a time (under the extractor's lock, on one
+  // of its threads) with increasing ranges; copy what you need and return quickly.
+  std::function<void(const OrderedMesh& mesh, size_t first, size_t end)> on_ready;
+  // Checked between subtrees; once true the extraction stops and returns CANCELLED.
+  const std::atomic<bool>* cancel = nullptr;
+};
+
 // The one-call form. `xf` places the hierarchy cube in world space (volume spacing, origin).
 absl::StatusOr<ExtractResult> Extract(const Hierarchy& hierarchy, const GridToWorld& xf,
-                                      const ExtractRequest& request);
+                                      const ExtractRequest& request,
+                                      const ExtractObserver* observer = nullptr);
 
 // Triangle count at a given eps without building the mesh; stops counting past `limit`.
 // Used by the budget search; exposed for tests and benchmarks.

@@ -147,10 +147,11 @@ struct SubtreeMesh {
   std::vector<std::pair<uint32_t, uint64_t>> boundary;  // (local vertex, edge key)
   int64_t visited = 0;
   int64_t leaves = 0;
-  void clear() {
-    mesh.clear();
-    boundary.clear();
-    visited = leaves = 0;
+  std::vector<char> shared_scratch;  // used while appending this part
+  void release() {                   // appended: give the memory back before the frame ends
+    mesh = OrderedMesh();
+    boundary = {};
+    shared_scratch = {};
   }
 };
 

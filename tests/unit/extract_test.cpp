@@ -398,3 +398,42 @@ TEST(Extract, BadRequestsGiveClearErrors) {
 
 }  // namespace
 }  // namespace isostream
+
+namespace isostream {
+namespace {
+
+// Streaming: the observer sees contiguous, growing prefixes whose vertices already exist, and
+// the prefixes add up to the final mesh; every vertex is used (no duplicates left by the join).
+TEST(ExtractStreaming, ObserverSeesOrderedPrefixesAndCancelStops) {
+  const auto h = testing::MakeHierarchy(5, testing::BlobsField);
+  ExtractRequest r = Request({0.2f, 0.5f, 0.8f}, 0.001, {50, 40, 30});
+  size_t expected_first = 0, calls = 0;
+  std::vector<uint32_t> seen;
+  ExtractObserver observer;
+  observer.on_ready = [&](const OrderedMesh& m, size_t first, size_t end) {
+    EXPECT_EQ(first, expected_first);
+    EXPECT_GE(end, first);
+    for (size_t i = 3 * first; i < 3 * end; ++i) {
+      EXPECT_LT(m.triangles[i], m.vertex_count());
+      seen.push_back(m.triangles[i]);
+    }
+    expected_first = end;
+    ++calls;
+  };
+  auto res = Extract(*h, kGrid, r, &observer);
+  ASSERT_TRUE(res.ok());
+  EXPECT_GT(calls, 10u);
+  EXPECT_EQ(expected_first, res->mesh.triangle_count());
+  EXPECT_EQ(seen, res->mesh.triangles);
+  std::vector<char> used(res->mesh.vertex_count(), 0);
+  for (uint32_t v : res->mesh.triangles) used[v] = 1;
+  EXPECT_EQ(std::count(used.begin(), used.end(), 0), 0) << "unreferenced vertices";
+
+  std::atomic<bool> cancel{true};
+  ExtractObserver stop;
+  stop.cancel = &cancel;
+  EXPECT_EQ(Extract(*h, kGrid, r, &stop).status().code(), absl::StatusCode::kCancelled);
+}
+
+}  // namespace
+}  // namespace isostream
