@@ -62,8 +62,8 @@ double Ms(std::chrono::steady_clock::time_point since) {
 Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequest& r,
                     double eps) {
   Context c;
-  c.pairs = h.pairs();
-  c.nb = (size_t(h.n()) + Hierarchy::kBrickMask) >> Hierarchy::kBrickLog2;
+  c.bricks = h.bricks();
+  c.nb = h.bricks_per_axis();
   c.k = h.k();
   c.n = h.n();
   for (int a = 0; a < 3; ++a) c.data_max[a] = h.data_dims()[a] - 1;

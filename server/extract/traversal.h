@@ -37,8 +37,8 @@ struct Node {
 
 // Everything the traversal reads, fixed for one request.
 struct Context {
-  const float* pairs = nullptr;  // Hierarchy::pairs(): sample at 2 i, eta at 2 i + 1
-  size_t nb = 0;                 // bricks per axis
+  const HierarchyBrick* bricks = nullptr;
+  size_t nb = 0;  // bricks per axis
   int k = 0, n = 0;
   glm::ivec3 data_max{0};             // data box is [0, data_max]
   bool clip = false;                  // the data box is smaller than the cube
@@ -55,14 +55,18 @@ struct Context {
 
   // Hierarchy::index, inlined with the brick count at hand.
   size_t Index(const glm::ivec3& p) const {
-    constexpr int b = Hierarchy::kBrickLog2, m = Hierarchy::kBrickMask;
+    constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
     const size_t brick = (size_t(p.z >> b) * nb + size_t(p.y >> b)) * nb + size_t(p.x >> b);
     return (brick << (3 * b)) | (size_t(p.z & m) << (2 * b)) | (size_t(p.y & m) << b) |
            size_t(p.x & m);
   }
-  float F(size_t i) const { return pairs[2 * i]; }
-  float Eta(size_t i) const { return pairs[2 * i + 1]; }
-  float F(const glm::ivec3& p) const { return pairs[2 * Index(p)]; }
+  float F(size_t i) const { return bricks[i >> 9].value[i & 511]; }
+  float Eta(size_t i) const { return DecodeEta(bricks[i >> 9].eta[i & 511]); }
+  float F(const glm::ivec3& p) const { return F(Index(p)); }
+  void Prefetch(size_t i) const {
+    __builtin_prefetch(&bricks[i >> 9].value[i & 511]);
+    __builtin_prefetch(&bricks[i >> 9].eta[i & 511]);
+  }
 };
 
 enum class Decision { kCull, kLeaf, kRefine };
@@ -124,17 +128,17 @@ inline void Bisect(const Context& c, const Node& t, Node out[2]) {
     o.cls = rt.child[ch];
     o.level = t.level + 1;
   }
-  // The next reads are the children's and grandchildren's refinement vertices (eta and f in
-  // one cache line): start fetching them now so a DFS step does not wait on memory.
+  // The next reads are the children's and grandchildren's refinement vertices: start
+  // fetching them now so a DFS step does not wait on memory.
   if (t.level + 2 < 3 * c.k) {
     for (int ch = 0; ch < 2; ++ch) {
       const Node& o = out[ch];
       const ReferenceTet& rc = (*c.tables)[o.cls];
       const glm::ivec3 points[5] = {o.v[0], o.v[1], o.v[2], o.v[3], RefinementPoint(o.v)};
-      __builtin_prefetch(c.pairs + 2 * c.Index(points[kRefinementPoint]));
+      c.Prefetch(c.Index(points[kRefinementPoint]));
       for (int g = 0; g < 2; ++g) {
         const glm::ivec3 mid = (points[rc.child_point[g][0]] + points[rc.child_point[g][3]]) / 2;
-        __builtin_prefetch(c.pairs + 2 * c.Index(mid));
+        c.Prefetch(c.Index(mid));
       }
     }
   }

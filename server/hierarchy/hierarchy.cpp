@@ -31,6 +31,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "server/hierarchy/refinement_vertex.h"
 
@@ -195,7 +196,7 @@ void Hierarchy::ForEachRow(F&& f) const {
 std::vector<float> Hierarchy::LinearSamples() const {
   std::vector<float> out(point_count());
   ForEachRow([&](int y, int z, size_t row) {
-    for (int x = 0; x < n_; ++x) out[row + x] = data_[2 * index(x, y, z)];
+    for (int x = 0; x < n_; ++x) out[row + x] = sample(x, y, z);
   });
   return out;
 }
@@ -203,13 +204,13 @@ std::vector<float> Hierarchy::LinearSamples() const {
 std::vector<float> Hierarchy::LinearEta() const {
   std::vector<float> out(point_count());
   ForEachRow([&](int y, int z, size_t row) {
-    for (int x = 0; x < n_; ++x) out[row + x] = data_[2 * index(x, y, z) + 1];
+    for (int x = 0; x < n_; ++x) out[row + x] = eta(x, y, z);
   });
   return out;
 }
 
 absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
-                                               UninitializedVector<float> eta) {
+                                               const UninitializedVector<float>& eta) {
   const size_t n = static_cast<size_t>(samples.n);
   if (samples.k < 1 || samples.k > 12 || samples.n != (1 << samples.k) + 1 ||
       samples.values.size() != n * n * n)
@@ -219,24 +220,24 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
   auto h = std::make_shared<Hierarchy>();
   h->k_ = samples.k;
   h->n_ = samples.n;
-  h->nb_ = (n + Hierarchy::kBrickMask) >> Hierarchy::kBrickLog2;
+  h->nb_ = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
   h->data_dims_ = samples.data_dims;
-  // Points of partial bricks beyond the cube are never read; zero them all the same so the
-  // store is deterministic (the pages are touched in parallel below either way).
-  h->data_.resize(2 * h->nb_ * h->nb_ * h->nb_ << (3 * Hierarchy::kBrickLog2));
-  float* data = h->data_.data();
   const size_t nb = h->nb_;
-  const size_t brick_floats = 2u << (3 * Hierarchy::kBrickLog2);
-  tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, nb * nb * nb), [&](const tbb::blocked_range<size_t>& r) {
-        std::fill(data + r.begin() * brick_floats, data + r.end() * brick_floats, 0.0f);
-      });
+  h->bricks_.resize(nb * nb * nb);
+  // Points of partial bricks beyond the cube are never read; zero them all the same so the
+  // store is deterministic. Bricks are first touched here, in parallel.
+  HierarchyBrick* bricks = h->bricks_.data();
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, nb * nb * nb),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      std::memset(static_cast<void*>(bricks + r.begin()), 0,
+                                  (r.end() - r.begin()) * sizeof(HierarchyBrick));
+                    });
   const Hierarchy& hc = *h;
   hc.ForEachRow([&](int y, int z, size_t row) {
     for (int x = 0; x < samples.n; ++x) {
-      const size_t i = 2 * hc.index(x, y, z);
-      data[i] = samples.values[row + x];
-      data[i + 1] = eta[row + x];
+      const size_t i = hc.index(x, y, z);
+      bricks[i >> 9].value[i & 511] = samples.values[row + x];
+      bricks[i >> 9].eta[i & 511] = EncodeEtaRoundingUp(eta[row + x]);
     }
   });
   return HierarchyPtr(std::move(h));
@@ -260,7 +261,7 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
   tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
   HierarchyBuilder builder(samples.k, samples.values.data(), eta.data());
   arena.execute([&] { builder.Run(options); });
-  return AssembleHierarchy(std::move(samples), std::move(eta));
+  return AssembleHierarchy(std::move(samples), eta);
 }
 
 }  // namespace isostream

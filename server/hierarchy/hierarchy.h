@@ -13,6 +13,8 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
+#include <cstring>
 #include <functional>
 #include <glm/vec3.hpp>
 #include <memory>
@@ -30,6 +32,34 @@ struct GridToWorld {
   glm::dvec3 spacing{1.0};
 };
 
+// eta is stored as bfloat16 (the top 16 bits of a float32) rounded up: 2 bytes per point,
+// within 2^-7 of the float value, and never below it, so the bound and the saturation order
+// (rounding up is monotone) survive.
+inline uint16_t EncodeEtaRoundingUp(float eta) {
+  uint32_t bits;
+  std::memcpy(&bits, &eta, sizeof(bits));
+  if (bits & 0xffffu) bits += 0x10000u;  // eta >= 0: adding one ulp of bfloat16 rounds up
+  return static_cast<uint16_t>(bits >> 16);
+}
+inline float DecodeEta(uint16_t stored) {
+  const uint32_t bits = uint32_t{stored} << 16;
+  float eta;
+  std::memcpy(&eta, &bits, sizeof(eta));
+  return eta;
+}
+
+// 8x8x8 points: their samples, then their eta (3 KiB). A traversal reads a tetrahedron's
+// corners and refinement vertex together, and they are close in space: bricks keep them on
+// the same pages and mostly in the same cache lines, where a linear layout puts every z step
+// a whole plane away.
+struct HierarchyBrick {
+  static constexpr int kLog2 = 3;
+  static constexpr int kMask = (1 << kLog2) - 1;
+  static constexpr int kPoints = 1 << (3 * kLog2);
+  float value[kPoints];
+  uint16_t eta[kPoints];
+};
+
 class Hierarchy {
  public:
   int k() const { return k_; }
@@ -37,34 +67,30 @@ class Hierarchy {
   const std::array<int, 3>& data_dims() const { return data_dims_; }
   size_t point_count() const { return size_t(n_) * n_ * n_; }
 
-  // Storage: sample and eta interleaved, in bricks of 8x8x8 points (4 KiB, one page). A
-  // traversal reads a tetrahedron's corners and refinement vertex together, and they are
-  // close in space: bricks keep them on the same page and mostly in the same cache lines,
-  // where a linear layout puts every z step a whole plane away.
+  // Point index: brick number * 512 + position inside the brick.
   size_t index(int x, int y, int z) const {
-    const size_t brick =
-        (size_t(z >> kBrickLog2) * nb_ + size_t(y >> kBrickLog2)) * nb_ + size_t(x >> kBrickLog2);
-    return (brick << (3 * kBrickLog2)) | (size_t(z & kBrickMask) << (2 * kBrickLog2)) |
-           (size_t(y & kBrickMask) << kBrickLog2) | size_t(x & kBrickMask);
+    constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
+    const size_t brick = (size_t(z >> b) * nb_ + size_t(y >> b)) * nb_ + size_t(x >> b);
+    return (brick << (3 * b)) | (size_t(z & m) << (2 * b)) | (size_t(y & m) << b) | size_t(x & m);
   }
-  const float* pairs() const { return data_.data(); }  // [2 i] sample, [2 i + 1] eta
-  float sample(int x, int y, int z) const { return data_[2 * index(x, y, z)]; }
-  float eta(int x, int y, int z) const { return data_[2 * index(x, y, z) + 1]; }
+  const HierarchyBrick* bricks() const { return bricks_.data(); }
+  size_t bricks_per_axis() const { return nb_; }
+  float sample_at(size_t i) const { return bricks_[i >> 9].value[i & 511]; }
+  float eta_at(size_t i) const { return DecodeEta(bricks_[i >> 9].eta[i & 511]); }
+  float sample(int x, int y, int z) const { return sample_at(index(x, y, z)); }
+  float eta(int x, int y, int z) const { return eta_at(index(x, y, z)); }
 
-  // Linear (x fastest) copies, for the cache file and for tests.
+  // Linear (x fastest) copies, for tests and tools.
   std::vector<float> LinearSamples() const;
   std::vector<float> LinearEta() const;
 
-  // Memory: eta's share and the whole interleaved store (bricks pad n up to a multiple of 8).
-  size_t eta_bytes() const { return data_.size() / 2 * sizeof(float); }
-  size_t total_bytes() const { return data_.size() * sizeof(float); }
-
-  static constexpr int kBrickLog2 = 3;
-  static constexpr int kBrickMask = (1 << kBrickLog2) - 1;
+  // Memory: eta's share and the whole store (bricks pad n up to a multiple of 8).
+  size_t eta_bytes() const { return bricks_.size() * sizeof(HierarchyBrick::eta); }
+  size_t total_bytes() const { return bricks_.size() * sizeof(HierarchyBrick); }
 
  private:
   friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(
-      PaddedSamples samples, UninitializedVector<float> eta);
+      PaddedSamples samples, const UninitializedVector<float>& eta);
   template <typename F>
   void ForEachRow(F&& f) const;
 
@@ -72,7 +98,7 @@ class Hierarchy {
   int n_ = 0;
   size_t nb_ = 0;  // bricks per axis
   std::array<int, 3> data_dims_{0, 0, 0};
-  UninitializedVector<float> data_;
+  UninitializedVector<HierarchyBrick> bricks_;
 };
 
 using HierarchyPtr = std::shared_ptr<const Hierarchy>;
@@ -90,6 +116,6 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
 // Builds the hierarchy's store from linear samples and linear eta (computed by
 // BuildHierarchy, or read from the on-disk cache). Sizes must match.
 absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
-                                               UninitializedVector<float> eta);
+                                               const UninitializedVector<float>& eta);
 
 }  // namespace isostream

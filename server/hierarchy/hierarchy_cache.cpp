@@ -164,7 +164,7 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   if (ReadCache(path, samples, hash, &eta, &reason)) {
     if (outcome) *outcome = CacheOutcome::kHit;
     if (why) *why = "loaded " + path;
-    return AssembleHierarchy(std::move(samples), std::move(eta));
+    return AssembleHierarchy(std::move(samples), eta);
   }
   result = std::filesystem::exists(path) ? CacheOutcome::kInvalidRebuilt : CacheOutcome::kMissBuilt;
   ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built, BuildHierarchy(std::move(samples), build));
