@@ -264,7 +264,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     // Copy the vertices this part owns; boundary ids issued above are corrected to the
     // compacted positions.
     size_t owned = 0;
-    for (char c : shared) owned += c != 1;
+    for (char mark : shared) owned += mark != 1;
     size_t out = m.vertex_count();
     m.positions.resize(3 * (out + owned));
     m.normals.resize(3 * (out + owned));
