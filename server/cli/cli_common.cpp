@@ -79,8 +79,8 @@ absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& v
   ExtractRequest r;
   ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> iso, ParseNumbers(args.iso, "--iso"));
   for (double v : iso) r.isovalues.push_back(float(v));
-  if (args.budget != 0) {
-    if (args.budget < 0) return absl::InvalidArgumentError("--budget must be positive");
+  if (args.budget != -1) {
+    if (args.budget <= 0) return absl::InvalidArgumentError("--budget must be a positive triangle count");
     r.budget = args.budget;
   } else if (args.eps < 0 || !std::isfinite(args.eps)) {
     return absl::InvalidArgumentError("give --eps E (>= 0, data units) or --budget N");

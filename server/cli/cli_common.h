@@ -27,7 +27,7 @@ absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args);
 struct ViewArgs {
   std::string iso;
   double eps = -1;
-  int64_t budget = 0;
+  int64_t budget = -1;  // -1: not given
   std::string eye, view_dir;
   std::string order = "back-to-front";
   std::string normals = "smooth";
