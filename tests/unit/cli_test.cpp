@@ -1,0 +1,98 @@
+// The `isostream` command line end to end: a real process, real files, exit codes and messages.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "server/extract/extractor.h"
+#include "server/hierarchy/prepared_volume.h"
+#include "shared/ply_io.h"
+
+namespace isostream {
+namespace {
+
+struct Run {
+  int code;
+  std::string output;  // stdout and stderr
+};
+
+Run Cli(const std::string& args) {
+  const std::string cmd = std::string(ISOSTREAM_CLI) + " " + args + " 2>&1";
+  Run r{-1, ""};
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return r;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+std::string TempPath(const std::string& name) {
+  return (std::filesystem::path(::testing::TempDir()) / name).string();
+}
+
+TEST(Cli, ExtractWritesThePlyOfTheDirectExtractionInOrder) {
+  const std::string out = TempPath("cli-bucky.ply");
+  const Run r = Cli("extract --volume buckyball:33 --iso 0.05,0.15,0.25 --eps 0.002 --eye 2,1.5,2.5 "
+                    "--no-cache -o " + out + " --stats");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("tets visited"), std::string::npos) << r.output;
+  auto ply = ReadPly(out);
+  ASSERT_TRUE(ply.ok()) << ply.status();
+  auto prepared = PrepareVolume("buckyball:33", {}, {}, {});
+  ASSERT_TRUE(prepared.ok());
+  ExtractRequest req;
+  req.isovalues = {0.05f, 0.15f, 0.25f};
+  req.eps = 0.002;
+  req.view.eye = {2, 1.5, 2.5};
+  auto direct = Extract(*prepared->hierarchy, prepared->grid_to_world, req);
+  ASSERT_TRUE(direct.ok());
+  EXPECT_GT(direct->mesh.triangle_count(), 1000u);
+  EXPECT_EQ(ply->triangles, direct->mesh.triangles);
+  EXPECT_EQ(ply->surface, direct->mesh.surface);
+  EXPECT_EQ(ply->positions, direct->mesh.positions);
+}
+
+TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
+  const std::string out = TempPath("cli-bad.ply");
+  struct Case {
+    std::string args, message;
+  };
+  const Case cases[] = {
+      {"info --volume /no/such/file.nii", "/no/such/file.nii"},
+      {"info --volume nosuch:33", "unknown generator"},
+      {"extract --volume sphere:17 --iso 0.5 --budget 0 -o " + out, "--budget"},
+      {"extract --volume sphere:17 --iso 0.5 --eps -1 -o " + out, "--eps"},
+      {"extract --volume sphere:17 --iso 0.5 -o " + out, "--eps"},
+      {"extract --volume sphere:17 --iso 1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17 --eps 0 -o " + out,
+       "16"},
+      {"extract --volume sphere:17 --iso abc --eps 0 -o " + out, "abc"},
+      {"extract --volume sphere:17 --iso 0.5 --eps 0 --view-dir 0,0,0 -o " + out, "direction"},
+      {"extract --volume sphere:17 --iso 0.5 --eps 0 -o " + TempPath("x.obj"), ".ply or .glb"},
+      {"extract --volume sphere:17 --iso 0.5 --eps 0 -o /no/such/dir/x.ply", "/no/such/dir"},
+  };
+  for (const auto& c : cases) {
+    const Run r = Cli(c.args + " --no-cache");
+    EXPECT_NE(r.code, 0) << c.args;
+    EXPECT_NE(r.output.find(c.message), std::string::npos) << c.args << "\n" << r.output;
+  }
+}
+
+TEST(Cli, TetsJsonListsTheSeventyTwoClasses) {
+  const Run r = Cli("tets --json");
+  ASSERT_EQ(r.code, 0);
+  size_t count = 0;
+  for (size_t at = r.output.find("\"level_mod3\""); at != std::string::npos;
+       at = r.output.find("\"level_mod3\"", at + 1))
+    ++count;
+  EXPECT_EQ(count, 72u);
+}
+
+}  // namespace
+}  // namespace isostream
