@@ -15,14 +15,14 @@
 namespace isostream {
 namespace {
 
-struct Run {
+struct CliRun {
   int code;
   std::string output;  // stdout and stderr
 };
 
-Run Cli(const std::string& args) {
+CliRun Cli(const std::string& args) {
   const std::string cmd = std::string(ISOSTREAM_CLI) + " " + args + " 2>&1";
-  Run r{-1, ""};
+  CliRun r{-1, ""};
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;
   std::array<char, 4096> buf;
@@ -39,7 +39,7 @@ std::string TempPath(const std::string& name) {
 
 TEST(Cli, ExtractWritesThePlyOfTheDirectExtractionInOrder) {
   const std::string out = TempPath("cli-bucky.ply");
-  const Run r = Cli("extract --volume buckyball:33 --iso 0.05,0.15,0.25 --eps 0.002 --eye 2,1.5,2.5 "
+  const CliRun r = Cli("extract --volume buckyball:33 --iso 0.05,0.15,0.25 --eps 0.002 --eye 2,1.5,2.5 "
                     "--no-cache -o " + out + " --stats");
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("tets visited"), std::string::npos) << r.output;
@@ -78,14 +78,14 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
       {"extract --volume sphere:17 --iso 0.5 --eps 0 -o /no/such/dir/x.ply", "/no/such/dir"},
   };
   for (const auto& c : cases) {
-    const Run r = Cli(c.args + " --no-cache");
+    const CliRun r = Cli(c.args + " --no-cache");
     EXPECT_NE(r.code, 0) << c.args;
     EXPECT_NE(r.output.find(c.message), std::string::npos) << c.args << "\n" << r.output;
   }
 }
 
 TEST(Cli, TetsJsonListsTheSeventyTwoClasses) {
-  const Run r = Cli("tets --json");
+  const CliRun r = Cli("tets --json");
   ASSERT_EQ(r.code, 0);
   size_t count = 0;
   for (size_t at = r.output.find("\"level_mod3\""); at != std::string::npos;
