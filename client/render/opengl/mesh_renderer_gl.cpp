@@ -1,0 +1,327 @@
+// MeshRenderer on OpenGL 3.3 core. Each chunk keeps its own vertex array, index buffer and a
+// buffer texture of per-triangle surface indices; drawing a frame is one glDrawElements per
+// chunk, in arrival order, blended over what is already there.
+#include <absl/strings/str_cat.h>
+
+#include <algorithm>
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <glm/gtc/type_ptr.hpp>
+#include <limits>
+#include <vector>
+
+#include "client/render/mesh_renderer.h"
+#include "client/render/opengl/embedded_shaders.h"
+#include "client/render/opengl/gl_api.h"
+#include "shared/mesh_validate.h"
+
+namespace isostream::render {
+namespace {
+
+constexpr GLuint kPositionAttribute = 0;
+constexpr GLuint kNormalAttribute = 1;
+constexpr GLint kSurfaceTextureUnit = 0;
+
+struct Chunk {
+  gl::VertexArray vertex_array;
+  gl::Buffer positions;
+  gl::Buffer normals;
+  gl::Buffer indices;
+  gl::Buffer surfaces;
+  gl::Texture surface_texture;
+  GLsizei index_count = 0;
+  bool has_normals = false;
+};
+
+struct Uniforms {
+  GLint view_projection = -1;
+  GLint triangle_surface = -1;
+  GLint surface_style = -1;
+  GLint eye = -1;
+  GLint forward = -1;
+  GLint orthographic = -1;
+  GLint light = -1;
+  GLint light_terms = -1;
+};
+
+// Arrays for one chunk in the layout the GPU gets; views into the caller's mesh when the whole
+// mesh is uploaded, into the renderer's scratch when a range is compacted.
+struct ChunkArrays {
+  const float* positions;
+  const float* normals;  // null when the mesh has no normals
+  size_t vertex_count;
+  const uint32_t* triangles;
+  const uint8_t* surface;
+  size_t triangle_count;
+};
+
+}  // namespace
+
+Palette DefaultPalette() {
+  Palette p;
+  p[0] = {{0.15f, 0.35f, 0.95f}, 0.3f};  // blue   (Gerstner Fig. 5, outermost)
+  p[1] = {{0.90f, 0.15f, 0.10f}, 0.5f};  // red
+  p[2] = {{0.10f, 0.75f, 0.20f}, 0.7f};  // green  (innermost of the three)
+  const glm::vec3 more[] = {
+      {0.95f, 0.80f, 0.10f},  // yellow
+      {0.80f, 0.20f, 0.75f},  // magenta
+      {0.10f, 0.75f, 0.85f},  // cyan
+      {1.00f, 0.50f, 0.05f},  // orange
+      {0.45f, 0.20f, 0.70f},  // purple
+      {0.00f, 0.50f, 0.50f},  // teal
+      {0.55f, 0.33f, 0.15f},  // brown
+      {1.00f, 0.60f, 0.70f},  // pink
+      {0.50f, 0.50f, 0.00f},  // olive
+      {0.10f, 0.10f, 0.45f},  // navy
+      {0.50f, 0.50f, 0.50f},  // grey
+      {0.60f, 0.95f, 0.20f},  // lime
+      {0.50f, 0.05f, 0.15f},  // maroon
+  };
+  static_assert(3 + std::size(more) == kMaxSurfaces);
+  for (size_t i = 0; i < std::size(more); ++i) p[3 + i] = {more[i], 0.5f};
+  return p;
+}
+
+glm::vec3 LightDirectionInWorld(const Lighting& lighting, const Camera& camera) {
+  const glm::vec3 d = lighting.direction_in_eye;
+  return glm::normalize(d.x * camera.Right() + d.y * camera.TrueUp() - d.z * camera.Forward());
+}
+
+struct MeshRenderer::Impl {
+  gl::Program program;
+  Uniforms uniforms;
+  GLint max_chunk_triangles = 0;
+
+  std::vector<Chunk> current;
+  std::vector<Chunk> pending;
+  size_t current_triangles = 0;
+  size_t pending_triangles = 0;
+  bool frame_open = false;
+
+  Palette palette = DefaultPalette();
+  Lighting lighting;
+  glm::vec4 background = kDefaultBackground;
+
+  // Scratch for range uploads, kept between calls so a stream of chunks does not allocate per
+  // chunk once the largest has been seen. remap holds kUnused for every vertex between calls.
+  static constexpr uint32_t kUnused = std::numeric_limits<uint32_t>::max();
+  std::vector<uint32_t> remap;
+  std::vector<uint32_t> used_vertices;
+  std::vector<float> scratch_positions;
+  std::vector<float> scratch_normals;
+  std::vector<uint32_t> scratch_triangles;
+
+  absl::Status Upload(const ChunkArrays& a) {
+    if (a.triangle_count > size_t(max_chunk_triangles)) {
+      return absl::InvalidArgumentError(absl::StrCat("chunk has ", a.triangle_count,
+                                                     " triangles; this OpenGL addresses at most ",
+                                                     max_chunk_triangles, " per chunk, split it"));
+    }
+    if (a.triangle_count == 0) return absl::OkStatus();
+    Chunk c;
+    c.vertex_array = gl::VertexArray::Make();
+    c.positions = gl::Buffer::Make();
+    c.indices = gl::Buffer::Make();
+    c.surfaces = gl::Buffer::Make();
+    c.surface_texture = gl::Texture::Make();
+    c.index_count = GLsizei(3 * a.triangle_count);
+    c.has_normals = a.normals != nullptr;
+
+    glBindVertexArray(c.vertex_array.get());
+    glBindBuffer(GL_ARRAY_BUFFER, c.positions.get());
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(3 * sizeof(float) * a.vertex_count), a.positions,
+                 GL_STATIC_DRAW);
+    glEnableVertexAttribArray(kPositionAttribute);
+    glVertexAttribPointer(kPositionAttribute, 3, GL_FLOAT, GL_FALSE, 0, nullptr);
+    if (c.has_normals) {
+      c.normals = gl::Buffer::Make();
+      glBindBuffer(GL_ARRAY_BUFFER, c.normals.get());
+      glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(3 * sizeof(float) * a.vertex_count), a.normals,
+                   GL_STATIC_DRAW);
+      glEnableVertexAttribArray(kNormalAttribute);
+      glVertexAttribPointer(kNormalAttribute, 3, GL_FLOAT, GL_FALSE, 0, nullptr);
+    } else {
+      glDisableVertexAttribArray(kNormalAttribute);
+    }
+    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, c.indices.get());
+    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(sizeof(uint32_t) * 3 * a.triangle_count),
+                 a.triangles, GL_STATIC_DRAW);
+    glBindVertexArray(0);
+    glBindBuffer(GL_ARRAY_BUFFER, 0);
+
+    glBindBuffer(GL_TEXTURE_BUFFER, c.surfaces.get());
+    glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(a.triangle_count), a.surface, GL_STATIC_DRAW);
+    glBindTexture(GL_TEXTURE_BUFFER, c.surface_texture.get());
+    glTexBuffer(GL_TEXTURE_BUFFER, GL_R8UI, c.surfaces.get());
+    glBindTexture(GL_TEXTURE_BUFFER, 0);
+    glBindBuffer(GL_TEXTURE_BUFFER, 0);
+
+    ISOSTREAM_RETURN_IF_ERROR(gl::CheckGl("MeshRenderer::AddChunk"));
+    pending.push_back(std::move(c));
+    pending_triangles += a.triangle_count;
+    return absl::OkStatus();
+  }
+
+  // Copies triangles [first, first + count) and just the vertices they use, renumbered in
+  // order of first use, into the scratch arrays.
+  ChunkArrays Compact(const OrderedMesh& mesh, size_t first, size_t count) {
+    const bool has_normals = !mesh.normals.empty();
+    if (remap.size() < mesh.vertex_count()) remap.resize(mesh.vertex_count(), kUnused);
+    used_vertices.clear();
+    scratch_triangles.resize(3 * count);
+    const uint32_t* in = mesh.triangles.data() + 3 * first;
+    for (size_t i = 0; i < 3 * count; ++i) {
+      uint32_t& slot = remap[in[i]];
+      if (slot == kUnused) {
+        slot = uint32_t(used_vertices.size());
+        used_vertices.push_back(in[i]);
+      }
+      scratch_triangles[i] = slot;
+    }
+    scratch_positions.resize(3 * used_vertices.size());
+    scratch_normals.resize(has_normals ? 3 * used_vertices.size() : 0);
+    for (size_t j = 0; j < used_vertices.size(); ++j) {
+      const size_t v = used_vertices[j];
+      std::copy_n(mesh.positions.data() + 3 * v, 3, scratch_positions.data() + 3 * j);
+      if (has_normals) std::copy_n(mesh.normals.data() + 3 * v, 3, scratch_normals.data() + 3 * j);
+      remap[v] = kUnused;
+    }
+    return {scratch_positions.data(),    has_normals ? scratch_normals.data() : nullptr,
+            used_vertices.size(),        scratch_triangles.data(),
+            mesh.surface.data() + first, count};
+  }
+};
+
+MeshRenderer::MeshRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+MeshRenderer::~MeshRenderer() = default;
+
+absl::StatusOr<std::unique_ptr<MeshRenderer>> MeshRenderer::Create() {
+  const std::string_view vertex = shaders::EmbeddedShader("mesh.vert.glsl");
+  const std::string_view fragment = shaders::EmbeddedShader("mesh.frag.glsl");
+  if (vertex.empty() || fragment.empty()) {
+    return absl::InternalError("mesh shaders were not embedded at build time");
+  }
+  auto impl = std::make_unique<Impl>();
+  ISOSTREAM_ASSIGN_OR_RETURN(
+      impl->program, gl::BuildProgram("mesh", absl::string_view(vertex.data(), vertex.size()),
+                                      absl::string_view(fragment.data(), fragment.size())));
+  const GLuint p = impl->program.get();
+  Uniforms& u = impl->uniforms;
+  u.view_projection = glGetUniformLocation(p, "u_view_projection");
+  u.triangle_surface = glGetUniformLocation(p, "u_triangle_surface");
+  u.surface_style = glGetUniformLocation(p, "u_surface_style");
+  u.eye = glGetUniformLocation(p, "u_eye");
+  u.forward = glGetUniformLocation(p, "u_forward");
+  u.orthographic = glGetUniformLocation(p, "u_orthographic");
+  u.light = glGetUniformLocation(p, "u_light");
+  u.light_terms = glGetUniformLocation(p, "u_light_terms");
+  // Every uniform is used by the shaders; a -1 here means the sources and this file disagree.
+  for (GLint location : {u.view_projection, u.triangle_surface, u.surface_style, u.eye, u.forward,
+                         u.orthographic, u.light, u.light_terms}) {
+    if (location < 0) return absl::InternalError("mesh shader lacks a uniform the renderer sets");
+  }
+  glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &impl->max_chunk_triangles);
+  ISOSTREAM_RETURN_IF_ERROR(gl::CheckGl("MeshRenderer::Create"));
+  return std::unique_ptr<MeshRenderer>(new MeshRenderer(std::move(impl)));
+}
+
+void MeshRenderer::BeginFrame() {
+  impl_->pending.clear();
+  impl_->pending_triangles = 0;
+  impl_->frame_open = true;
+}
+
+absl::Status MeshRenderer::AddChunk(const OrderedMesh& mesh) {
+  if (!impl_->frame_open) return absl::FailedPreconditionError("AddChunk outside a frame");
+  ISOSTREAM_RETURN_IF_ERROR(ValidateMeshSizes(mesh));
+  ISOSTREAM_RETURN_IF_ERROR(ValidateTriangleRange(mesh, 0, mesh.triangle_count()));
+  return impl_->Upload({mesh.positions.data(), mesh.normals.empty() ? nullptr : mesh.normals.data(),
+                        mesh.vertex_count(), mesh.triangles.data(), mesh.surface.data(),
+                        mesh.triangle_count()});
+}
+
+absl::Status MeshRenderer::AddChunk(const OrderedMesh& mesh, size_t first_triangle,
+                                    size_t triangle_count) {
+  if (!impl_->frame_open) return absl::FailedPreconditionError("AddChunk outside a frame");
+  ISOSTREAM_RETURN_IF_ERROR(ValidateMeshSizes(mesh));
+  ISOSTREAM_RETURN_IF_ERROR(ValidateTriangleRange(mesh, first_triangle, triangle_count));
+  return impl_->Upload(impl_->Compact(mesh, first_triangle, triangle_count));
+}
+
+absl::Status MeshRenderer::EndFrame() {
+  if (!impl_->frame_open) return absl::FailedPreconditionError("EndFrame without BeginFrame");
+  impl_->current = std::move(impl_->pending);
+  impl_->current_triangles = impl_->pending_triangles;
+  impl_->pending.clear();
+  impl_->pending_triangles = 0;
+  impl_->frame_open = false;
+  return gl::CheckGl("MeshRenderer::EndFrame");
+}
+
+absl::Status MeshRenderer::Render(const Camera& camera) {
+  if (!IsValidCamera(camera)) {
+    return absl::InvalidArgumentError(
+        "Render: camera has no valid projection (eye == target, up parallel to the view, "
+        "near/far, aspect or field of view out of range)");
+  }
+  const Impl& m = *impl_;
+  // Order, not depth, decides visibility: each fragment is composited over everything drawn
+  // before it. Alpha uses (ONE, ONE_MINUS_SRC_ALPHA) so the framebuffer stays opaque over an
+  // opaque background instead of turning translucent where layers pile up.
+  glDisable(GL_DEPTH_TEST);
+  glDepthMask(GL_FALSE);
+  glDisable(GL_CULL_FACE);
+  glEnable(GL_BLEND);
+  glBlendEquation(GL_FUNC_ADD);
+  glBlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+  glClearColor(m.background.r, m.background.g, m.background.b, m.background.a);
+  glClear(GL_COLOR_BUFFER_BIT);
+
+  glUseProgram(m.program.get());
+  glUniformMatrix4fv(m.uniforms.view_projection, 1, GL_FALSE,
+                     glm::value_ptr(camera.ViewProjection()));
+  glUniform1i(m.uniforms.triangle_surface, kSurfaceTextureUnit);
+  GLfloat styles[4 * kMaxSurfaces];
+  for (int s = 0; s < kMaxSurfaces; ++s) {
+    const SurfaceStyle& style = m.palette[size_t(s)];
+    styles[4 * s + 0] = std::clamp(style.color.r, 0.0f, 1.0f);
+    styles[4 * s + 1] = std::clamp(style.color.g, 0.0f, 1.0f);
+    styles[4 * s + 2] = std::clamp(style.color.b, 0.0f, 1.0f);
+    styles[4 * s + 3] = std::clamp(style.opacity, 0.0f, 1.0f);
+  }
+  glUniform4fv(m.uniforms.surface_style, kMaxSurfaces, styles);
+  glUniform3fv(m.uniforms.eye, 1, glm::value_ptr(camera.eye));
+  const glm::vec3 forward = camera.Forward();
+  glUniform3fv(m.uniforms.forward, 1, glm::value_ptr(forward));
+  glUniform1i(m.uniforms.orthographic, camera.projection == Projection::kOrthographic);
+  const glm::vec3 light = LightDirectionInWorld(m.lighting, camera);
+  glUniform3fv(m.uniforms.light, 1, glm::value_ptr(light));
+  // pow(0, 0) is undefined in GLSL; a non-positive exponent is clamped away from it.
+  glUniform4f(m.uniforms.light_terms, m.lighting.ambient, m.lighting.diffuse, m.lighting.specular,
+              std::max(m.lighting.shininess, 1e-3f));
+
+  glActiveTexture(GL_TEXTURE0 + kSurfaceTextureUnit);
+  for (const Chunk& c : m.current) {
+    glBindVertexArray(c.vertex_array.get());
+    // A disabled attribute array reads the context's current value, not the VAO's.
+    if (!c.has_normals) glVertexAttrib3f(kNormalAttribute, 0.0f, 0.0f, 0.0f);
+    glBindTexture(GL_TEXTURE_BUFFER, c.surface_texture.get());
+    glDrawElements(GL_TRIANGLES, c.index_count, GL_UNSIGNED_INT, nullptr);
+  }
+  glBindVertexArray(0);
+  glBindTexture(GL_TEXTURE_BUFFER, 0);
+  glUseProgram(0);
+  return gl::CheckGl("MeshRenderer::Render");
+}
+
+void MeshRenderer::SetPalette(const Palette& palette) { impl_->palette = palette; }
+const Palette& MeshRenderer::palette() const { return impl_->palette; }
+void MeshRenderer::SetLighting(const Lighting& lighting) { impl_->lighting = lighting; }
+const Lighting& MeshRenderer::lighting() const { return impl_->lighting; }
+void MeshRenderer::SetBackground(const glm::vec4& rgba) { impl_->background = rgba; }
+const glm::vec4& MeshRenderer::background() const { return impl_->background; }
+size_t MeshRenderer::chunk_count() const { return impl_->current.size(); }
+size_t MeshRenderer::triangle_count() const { return impl_->current_triangles; }
+bool MeshRenderer::frame_pending() const { return impl_->frame_open; }
+
+}  // namespace isostream::render

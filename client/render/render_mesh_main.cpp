@@ -1,0 +1,224 @@
+// isostream-render-mesh: draws a PLY frame (faces in draw order) headless and writes PNGs. A
+// way to look at what the extractor produced before the streaming viewer exists; it uses the
+// same MeshRenderer that viewer will.
+//
+// The faces are blended in file order whatever the camera: the picture is right for the eye the
+// mesh was extracted for (isostream extract's default eye matches the default camera here when
+// the mesh fills the volume) and only approximately so from other eyes, orbits included.
+#include <absl/strings/str_cat.h>
+#include <absl/strings/str_format.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <glm/trigonometric.hpp>
+#include <string>
+#include <vector>
+
+#include "client/render/camera.h"
+#include "client/render/headless_context.h"
+#include "client/render/image.h"
+#include "client/render/mesh_renderer.h"
+#include "shared/ply_io.h"
+
+namespace isostream::render {
+namespace {
+
+struct Args {
+  std::string input;
+  std::string output;
+  std::string size = "800x600";
+  std::string eye;
+  std::string target;
+  std::string up = "0,1,0";
+  std::string view_dir;
+  std::string background;
+  double fov = 0.0;  // 0: just wide enough to frame the mesh
+  int orbit = 0;
+};
+
+absl::StatusOr<std::vector<float>> ParseFloats(const std::string& text, const char* what,
+                                               size_t expected) {
+  std::vector<float> out;
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t end = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, end - start);
+    char* stop = nullptr;
+    const double v = std::strtod(item.c_str(), &stop);
+    if (item.empty() || stop != item.c_str() + item.size() || !std::isfinite(v))
+      return absl::InvalidArgumentError(absl::StrCat(what, ": '", item, "' is not a number"));
+    out.push_back(float(v));
+    start = end + 1;
+  }
+  if (out.size() != expected)
+    return absl::InvalidArgumentError(absl::StrCat(what, " needs ", expected, " numbers"));
+  return out;
+}
+
+absl::StatusOr<glm::vec3> ParseVec3(const std::string& text, const char* what) {
+  ISOSTREAM_ASSIGN_OR_RETURN(std::vector<float> v, ParseFloats(text, what, 3));
+  return glm::vec3(v[0], v[1], v[2]);
+}
+
+absl::Status ParseSize(const std::string& text, int* width, int* height) {
+  char tail = 0;
+  if (std::sscanf(text.c_str(), "%dx%d%c", width, height, &tail) != 2 || *width < 1 ||
+      *height < 1) {
+    return absl::InvalidArgumentError(absl::StrCat("--size: '", text, "' is not WxH"));
+  }
+  return absl::OkStatus();
+}
+
+// out.png -> out_007.png, so an orbit's frames sort in order.
+std::string NumberedPath(const std::string& path, int index) {
+  const size_t slash = path.find_last_of('/');
+  const size_t dot = path.find_last_of('.');
+  const bool has_extension =
+      dot != std::string::npos && (slash == std::string::npos || dot > slash);
+  const std::string stem = has_extension ? path.substr(0, dot) : path;
+  const std::string extension = has_extension ? path.substr(dot) : ".png";
+  return absl::StrFormat("%s_%03d%s", stem, index, extension);
+}
+
+absl::StatusOr<Camera> MakeCamera(const Args& args, const OrderedMesh& mesh, float aspect) {
+  glm::vec3 lo(0.0f), hi(0.0f);
+  for (size_t i = 0; i < mesh.vertex_count(); ++i) {
+    const glm::vec3 p(mesh.positions[3 * i], mesh.positions[3 * i + 1], mesh.positions[3 * i + 2]);
+    lo = i == 0 ? p : glm::min(lo, p);
+    hi = i == 0 ? p : glm::max(hi, p);
+  }
+  // Framing uses the sphere about the box centre through the farthest vertex: tighter than the
+  // box's own bounding sphere for round meshes such as isosurfaces of blobs.
+  const glm::vec3 centre = 0.5f * (lo + hi);
+  float radius = 0.0f;
+  for (size_t i = 0; i < mesh.vertex_count(); ++i) {
+    const glm::vec3 p(mesh.positions[3 * i], mesh.positions[3 * i + 1], mesh.positions[3 * i + 2]);
+    radius = std::max(radius, glm::length(p - centre));
+  }
+  radius = std::max(radius, 1e-6f);
+
+  Camera camera;
+  camera.aspect = aspect;
+  ISOSTREAM_ASSIGN_OR_RETURN(camera.up, ParseVec3(args.up, "--up"));
+  camera.target = centre;
+  if (!args.target.empty()) {
+    ISOSTREAM_ASSIGN_OR_RETURN(camera.target, ParseVec3(args.target, "--target"));
+  }
+  if (!args.view_dir.empty()) {
+    ISOSTREAM_ASSIGN_OR_RETURN(glm::vec3 d, ParseVec3(args.view_dir, "--view-dir"));
+    camera.projection = Projection::kOrthographic;
+    const glm::vec3 target = camera.target;
+    camera = FrameSphere(centre, radius, -d, camera);
+    camera.eye += target - camera.target;
+    camera.target = target;
+  } else {
+    if (!args.eye.empty()) {
+      ISOSTREAM_ASSIGN_OR_RETURN(camera.eye, ParseVec3(args.eye, "--eye"));
+    } else {
+      // isostream extract's default eye, with the mesh's box standing in for the volume's: for
+      // a mesh that spans its volume both tools then use the same eye, and the draw order in
+      // the file is exact for this picture.
+      const glm::vec3 direction = glm::normalize(glm::vec3(0.8f, 0.6f, 1.0f));
+      camera.eye = camera.target + 1.6f * std::max(glm::length(hi - lo), radius) * direction;
+    }
+    if (args.fov > 0.0) {
+      camera.fov_y_degrees = float(args.fov);
+    } else {
+      // Just wide enough for the bounding sphere in the narrower image axis.
+      const float distance = glm::length(centre - camera.eye);
+      const float half =
+          distance > 1.05f * radius ? std::asin(1.05f * radius / distance) : glm::radians(60.0f);
+      const float half_v = std::atan(std::tan(half) / std::min(1.0f, aspect));
+      camera.fov_y_degrees = std::min(glm::degrees(2.0f * half_v), 150.0f);
+    }
+  }
+  // Clip planes that enclose the mesh's bounding sphere from wherever the eye ended up.
+  const float distance = glm::dot(centre - camera.eye, camera.Forward());
+  camera.far_plane = std::max(distance + 1.1f * radius, 2e-3f * radius);
+  camera.near_plane = std::max(distance - 1.1f * radius, 1e-3f * camera.far_plane);
+  if (!IsValidCamera(camera)) {
+    return absl::InvalidArgumentError(
+        "the camera is degenerate: --eye equals --target, or --up is parallel to the view");
+  }
+  return camera;
+}
+
+absl::Status Run(const Args& args) {
+  int width = 0, height = 0;
+  ISOSTREAM_RETURN_IF_ERROR(ParseSize(args.size, &width, &height));
+  ISOSTREAM_ASSIGN_OR_RETURN(OrderedMesh mesh, ReadPly(args.input));
+  ISOSTREAM_ASSIGN_OR_RETURN(Camera camera, MakeCamera(args, mesh, float(width) / float(height)));
+
+  HeadlessContextOptions options;
+  options.width = width;
+  options.height = height;
+  ISOSTREAM_ASSIGN_OR_RETURN(std::unique_ptr<HeadlessContext> context,
+                             HeadlessContext::Create(options));
+  ISOSTREAM_ASSIGN_OR_RETURN(std::unique_ptr<MeshRenderer> renderer, MeshRenderer::Create());
+  if (!args.background.empty()) {
+    ISOSTREAM_ASSIGN_OR_RETURN(glm::vec3 bg, ParseVec3(args.background, "--background"));
+    renderer->SetBackground(glm::vec4(bg, 1.0f));
+  }
+
+  const auto start = std::chrono::steady_clock::now();
+  renderer->BeginFrame();
+  ISOSTREAM_RETURN_IF_ERROR(renderer->AddChunk(mesh));
+  ISOSTREAM_RETURN_IF_ERROR(renderer->EndFrame());
+
+  const std::vector<Camera> cameras =
+      args.orbit > 0 ? OrbitCameras(camera, args.orbit) : std::vector<Camera>{camera};
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    ISOSTREAM_RETURN_IF_ERROR(renderer->Render(cameras[i]));
+    ISOSTREAM_ASSIGN_OR_RETURN(Image image, context->ReadPixels());
+    const std::string path = args.orbit > 0 ? NumberedPath(args.output, int(i)) : args.output;
+    ISOSTREAM_RETURN_IF_ERROR(WritePng(image, path));
+  }
+  const double ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  std::fprintf(stderr,
+               "%zu triangles, %zu image(s) %dx%d in %.1f ms on %s (%s); eye %.4g,%.4g,%.4g "
+               "target %.4g,%.4g,%.4g\n",
+               mesh.triangle_count(), cameras.size(), width, height, ms,
+               context->renderer_name().c_str(), context->platform_name().c_str(), camera.eye.x,
+               camera.eye.y, camera.eye.z, camera.target.x, camera.target.y, camera.target.z);
+  return absl::OkStatus();
+}
+
+}  // namespace
+}  // namespace isostream::render
+
+int main(int argc, char** argv) {
+  isostream::render::Args args;
+  CLI::App app{
+      "Draw a PLY mesh (faces in back-to-front draw order) with alpha blending, headless, to "
+      "PNG. Faces are blended in file order for every camera, so the picture is exact only for "
+      "the eye the mesh was extracted for."};
+  app.add_option("input", args.input, "PLY file written by isostream extract")->required();
+  app.add_option("-o,--output", args.output, "PNG to write (with --orbit: name_000.png, ...)")
+      ->required();
+  app.add_option("--size", args.size, "image size WxH")->capture_default_str();
+  auto* eye = app.add_option("--eye", args.eye, "perspective eye x,y,z (default: frame the mesh)");
+  app.add_option("--target", args.target, "look-at point x,y,z (default: centre of the mesh)");
+  app.add_option("--up", args.up, "up direction x,y,z")->capture_default_str();
+  auto* dir = app.add_option("--view-dir", args.view_dir, "orthographic view direction x,y,z");
+  eye->excludes(dir);
+  app.add_option("--fov", args.fov, "vertical field of view, degrees (default: fit the mesh)")
+      ->check(CLI::Range(1.0, 179.0));
+  app.add_option("--orbit", args.orbit, "write N images on a full turn about --up")
+      ->check(CLI::Range(1, 100000));
+  app.add_option("--background", args.background, "background r,g,b in 0..1 (default white)");
+  CLI11_PARSE(app, argc, argv);
+
+  const absl::Status status = isostream::render::Run(args);
+  if (!status.ok()) {
+    std::fprintf(stderr, "isostream-render-mesh: %s\n", std::string(status.message()).c_str());
+    return 1;
+  }
+  return 0;
+}

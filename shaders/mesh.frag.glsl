@@ -1,0 +1,38 @@
+#version 330 core
+// Two-sided Blinn-Phong with a headlight; the formula is spelled out in
+// client/render/mesh_renderer.h and must stay in step with it.
+
+in vec3 v_position;
+in vec3 v_normal;
+
+// One byte per triangle of the chunk being drawn, indexed by gl_PrimitiveID (which counts
+// from 0 in each draw call): the mesh stores surfaces per triangle, and this avoids splitting
+// shared vertices into per-surface copies.
+uniform usamplerBuffer u_triangle_surface;
+uniform vec4 u_surface_style[16];  // rgb colour, opacity
+
+uniform vec3 u_eye;
+uniform vec3 u_forward;
+uniform bool u_orthographic;
+uniform vec3 u_light;         // unit, world space
+uniform vec4 u_light_terms;   // ambient, diffuse, specular, shininess
+
+out vec4 frag_color;
+
+void main() {
+  uint surface = texelFetch(u_triangle_surface, gl_PrimitiveID).r;
+  vec4 style = u_surface_style[min(surface, 15u)];
+
+  vec3 v = u_orthographic ? -u_forward : normalize(u_eye - v_position);
+  vec3 n = v_normal;
+  // Zero normals mean "undefined" in OrderedMesh; the facet normal keeps such meshes lit.
+  if (dot(n, n) < 1e-12) n = cross(dFdx(v_position), dFdy(v_position));
+  n = normalize(n);
+  if (dot(n, v) < 0.0) n = -n;
+
+  vec3 h = normalize(u_light + v);
+  float lambert = max(dot(n, u_light), 0.0);
+  float highlight = pow(max(dot(n, h), 0.0), u_light_terms.w);
+  vec3 rgb = style.rgb * (u_light_terms.x + u_light_terms.y * lambert) + u_light_terms.z * highlight;
+  frag_color = vec4(min(rgb, vec3(1.0)), style.a);
+}
