@@ -9,5 +9,6 @@ namespace isostream::cli {
 CLI::App* AddInfoCommand(CLI::App& app, int* exit_code);
 CLI::App* AddTetsCommand(CLI::App& app, int* exit_code);
 CLI::App* AddExtractCommand(CLI::App& app, int* exit_code);
+CLI::App* AddFetchCommand(CLI::App& app, int* exit_code);
 
 }  // namespace isostream::cli

@@ -9,6 +9,7 @@ int main(int argc, char** argv) {
   isostream::cli::AddInfoCommand(app, &exit_code);
   isostream::cli::AddTetsCommand(app, &exit_code);
   isostream::cli::AddExtractCommand(app, &exit_code);
+  isostream::cli::AddFetchCommand(app, &exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

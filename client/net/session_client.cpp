@@ -1,0 +1,189 @@
+#include "client/net/session_client.h"
+
+#include "proto/health.grpc.pb.h"
+#include "shared/frame_codec.h"
+
+namespace isostream::net {
+
+absl::Status FromGrpc(const grpc::Status& s) {
+  if (s.ok()) return absl::OkStatus();
+  return absl::Status(absl::StatusCode(int(s.error_code())), s.error_message());
+}
+
+absl::Status FrameAssembler::Add(const pb::FrameChunk& chunk) {
+  if (!started_ || complete_ || chunk.frame_id() != frame_.id || chunk.coarse() != frame_.coarse) {
+    if (chunk.chunk_index() != 0)
+      return absl::DataLossError("frame " + std::to_string(chunk.frame_id()) + " starts at chunk " +
+                                 std::to_string(chunk.chunk_index()));
+    frame_ = Frame();
+    frame_.id = chunk.frame_id();
+    frame_.coarse = chunk.coarse();
+    started_ = true;
+    complete_ = false;
+    next_chunk_ = 0;
+  }
+  if (chunk.chunk_index() != next_chunk_)
+    return absl::DataLossError("chunk " + std::to_string(chunk.chunk_index()) + " arrived, " +
+                               std::to_string(next_chunk_) + " expected");
+  if (chunk.first_triangle() != frame_.mesh.triangle_count())
+    return absl::DataLossError("chunk triangle ranges are not contiguous");
+  const size_t before = frame_.mesh.triangle_count();
+  ISOSTREAM_RETURN_IF_ERROR(DecodeAnyChunk(chunk.data().data(), chunk.data().size(), &frame_.mesh));
+  if (frame_.mesh.triangle_count() - before != chunk.triangle_count())
+    return absl::DataLossError("chunk triangle count does not match its data");
+  ++next_chunk_;
+  ++frame_.chunks;
+  frame_.bytes += int64_t(chunk.data().size());
+  if (chunk.last()) {
+    frame_.stats = chunk.stats();
+    complete_ = true;
+  }
+  return absl::OkStatus();
+}
+
+Frame FrameAssembler::Take() {
+  Frame f = std::move(frame_);
+  frame_ = Frame();
+  started_ = false;
+  complete_ = false;
+  return f;
+}
+
+Session::~Session() {
+  if (!finished_) Cancel();
+}
+
+absl::Status Session::Send(const pb::ViewRequest& view) {
+  if (closed_) return absl::FailedPreconditionError("session closed for sending");
+  if (!stream_->Write(view)) return absl::UnavailableError("the session stream is broken");
+  return absl::OkStatus();
+}
+
+bool Session::Read(pb::FrameChunk* chunk) { return stream_->Read(chunk); }
+
+absl::Status Session::CloseSend() {
+  if (closed_) return absl::OkStatus();
+  closed_ = true;
+  if (!stream_->WritesDone()) return absl::UnavailableError("the session stream is broken");
+  return absl::OkStatus();
+}
+
+absl::Status Session::Finish() {
+  if (finished_) return absl::FailedPreconditionError("already finished");
+  pb::FrameChunk ignored;
+  while (stream_->Read(&ignored)) {
+  }
+  finished_ = true;
+  return FromGrpc(stream_->Finish());
+}
+
+void Session::Cancel() {
+  context_->TryCancel();
+  if (!finished_) {
+    pb::FrameChunk ignored;
+    while (stream_->Read(&ignored)) {
+    }
+    finished_ = true;
+    stream_->Finish();
+  }
+}
+
+absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& options) {
+  auto c = std::unique_ptr<Client>(new Client());
+  c->options_ = options;
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(options.max_receive_bytes);
+  std::shared_ptr<grpc::ChannelCredentials> creds;
+  if (options.tls_ca_pem.empty()) {
+    creds = grpc::InsecureChannelCredentials();
+  } else {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = options.tls_ca_pem;
+    creds = grpc::SslCredentials(ssl);
+  }
+  c->channel_ = grpc::CreateCustomChannel(options.address, creds, args);
+  if (!c->channel_)
+    return absl::InvalidArgumentError("cannot create a channel to " + options.address);
+  c->stub_ = pb::Isostream::NewStub(c->channel_);
+  return c;
+}
+
+void Client::Prepare(grpc::ClientContext* context, bool deadline) const {
+  if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
+  if (deadline) context->set_deadline(std::chrono::system_clock::now() + options_.call_timeout);
+}
+
+absl::StatusOr<pb::ListVolumesResponse> Client::ListVolumes() {
+  grpc::ClientContext context;
+  Prepare(&context, true);
+  pb::ListVolumesResponse response;
+  ISOSTREAM_RETURN_IF_ERROR(
+      FromGrpc(stub_->ListVolumes(&context, pb::ListVolumesRequest(), &response)));
+  return response;
+}
+
+absl::StatusOr<pb::VolumeInfo> Client::GetVolumeInfo(const std::string& name, int bins) {
+  grpc::ClientContext context;
+  Prepare(&context, true);
+  pb::GetVolumeInfoRequest request;
+  request.set_name(name);
+  request.set_histogram_bins(bins);
+  pb::VolumeInfo response;
+  ISOSTREAM_RETURN_IF_ERROR(FromGrpc(stub_->GetVolumeInfo(&context, request, &response)));
+  return response;
+}
+
+absl::StatusOr<pb::ServerStats> Client::GetServerStats() {
+  grpc::ClientContext context;
+  Prepare(&context, true);
+  pb::ServerStats response;
+  ISOSTREAM_RETURN_IF_ERROR(
+      FromGrpc(stub_->GetServerStats(&context, pb::GetServerStatsRequest(), &response)));
+  return response;
+}
+
+absl::StatusOr<bool> Client::CheckHealth() {
+  auto stub = grpc::health::v1::Health::NewStub(channel_);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + options_.call_timeout);
+  grpc::health::v1::HealthCheckResponse response;
+  ISOSTREAM_RETURN_IF_ERROR(
+      FromGrpc(stub->Check(&context, grpc::health::v1::HealthCheckRequest(), &response)));
+  return response.status() == grpc::health::v1::HealthCheckResponse::SERVING;
+}
+
+absl::StatusOr<Frame> Client::Fetch(const pb::ViewRequest& view,
+                                    const std::function<void(const pb::FrameChunk&)>& on_chunk) {
+  grpc::ClientContext context;
+  Prepare(&context, true);
+  auto reader = stub_->Extract(&context, view);
+  FrameAssembler assembler;
+  Frame result;
+  bool have = false;
+  absl::Status problem;
+  pb::FrameChunk chunk;
+  while (reader->Read(&chunk)) {
+    if (on_chunk) on_chunk(chunk);
+    if (!problem.ok()) continue;
+    problem = assembler.Add(chunk);
+    if (problem.ok() && assembler.complete() && !assembler.frame().coarse) {
+      result = assembler.Take();
+      have = true;
+    }
+  }
+  ISOSTREAM_RETURN_IF_ERROR(FromGrpc(reader->Finish()));
+  ISOSTREAM_RETURN_IF_ERROR(problem);
+  if (!have) return absl::DataLossError("the stream ended without a complete frame");
+  return result;
+}
+
+absl::StatusOr<std::unique_ptr<Session>> Client::OpenSession() {
+  auto s = std::unique_ptr<Session>(new Session());
+  s->context_ = std::make_unique<grpc::ClientContext>();
+  Prepare(s->context_.get(), false);
+  s->stream_ = stub_->Session(s->context_.get());
+  if (!s->stream_) return absl::UnavailableError("cannot open a session");
+  return s;
+}
+
+}  // namespace isostream::net

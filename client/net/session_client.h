@@ -1,0 +1,111 @@
+// The client side of the isostream wire contract: connect, ask for frames, receive and decode
+// them. Used by `isostream fetch`, the integration tests, the benchmarks and the viewer.
+//
+// Threading: a Client may be shared by threads. A Session's Send may run on one thread while
+// another blocks in Read (gRPC allows one writer and one reader at a time on a stream).
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <chrono>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "proto/isostream.grpc.pb.h"
+#include "shared/ordered_mesh.h"
+#include "shared/status.h"
+
+namespace isostream::net {
+
+namespace pb = ::isostream::v1;
+
+struct ClientOptions {
+  std::string address = "127.0.0.1:7878";
+  std::string token;       // sent as "authorization: Bearer TOKEN" when not empty
+  std::string tls_ca_pem;  // PEM root certificates; empty: plaintext
+  // Chunks are below 4 MiB; the explicit limit leaves room for a daemon with bigger chunks.
+  int max_receive_bytes = 8 << 20;
+  std::chrono::milliseconds call_timeout{30000};  // unary calls and one-shot frames
+};
+
+// gRPC status -> absl status (the codes share their numbering).
+absl::Status FromGrpc(const grpc::Status& status);
+
+// A frame as it is received: chunks decoded and appended in order.
+struct Frame {
+  uint64_t id = 0;
+  bool coarse = false;
+  OrderedMesh mesh;
+  pb::FrameStats stats;  // from the last chunk
+  int chunks = 0;
+  int64_t bytes = 0;  // encoded bytes received
+};
+
+// Puts chunks back together and checks that they arrive as the contract says: in chunk order,
+// each frame's chunks consecutive, triangle ranges contiguous.
+class FrameAssembler {
+ public:
+  // Decodes `chunk` into the frame in progress (a new frame id or coarse flag starts a new
+  // frame, dropping an incomplete one: that frame was superseded). DataLoss/InvalidArgument
+  // for chunks that do not decode or arrive out of order.
+  absl::Status Add(const pb::FrameChunk& chunk);
+  bool complete() const { return complete_; }
+  const Frame& frame() const { return frame_; }
+  Frame Take();
+
+ private:
+  Frame frame_;
+  bool started_ = false;
+  bool complete_ = false;
+  uint32_t next_chunk_ = 0;
+};
+
+class Session {
+ public:
+  ~Session();  // cancels the stream if it was not closed
+  // Sends a view; frames for earlier views may still arrive until this one's frames start.
+  absl::Status Send(const pb::ViewRequest& view);
+  // Blocks for the next chunk; false when the stream has ended (then call Finish).
+  bool Read(pb::FrameChunk* chunk);
+  // Says no more views will come (the server finishes after the frame in progress).
+  absl::Status CloseSend();
+  // Drains what is left and returns the stream's final status.
+  absl::Status Finish();
+  // Drops the stream now (as a client that disappears would).
+  void Cancel();
+
+ private:
+  friend class Client;
+  std::unique_ptr<grpc::ClientContext> context_;
+  std::unique_ptr<grpc::ClientReaderWriter<pb::ViewRequest, pb::FrameChunk>> stream_;
+  bool closed_ = false, finished_ = false;
+};
+
+class Client {
+ public:
+  // Creates the channel; does not wait for the server (calls fail with UNAVAILABLE if it is
+  // not there).
+  static absl::StatusOr<std::unique_ptr<Client>> Connect(const ClientOptions& options);
+
+  absl::StatusOr<pb::ListVolumesResponse> ListVolumes();
+  absl::StatusOr<pb::VolumeInfo> GetVolumeInfo(const std::string& name, int histogram_bins = 0);
+  absl::StatusOr<pb::ServerStats> GetServerStats();
+  // grpc.health.v1 Check for the whole server: true when SERVING.
+  absl::StatusOr<bool> CheckHealth();
+
+  // One frame through Extract: returns the requested (refined) frame; `on_chunk`, if set, sees
+  // every chunk as it arrives, coarse ones included.
+  absl::StatusOr<Frame> Fetch(const pb::ViewRequest& view,
+                              const std::function<void(const pb::FrameChunk&)>& on_chunk = {});
+
+  absl::StatusOr<std::unique_ptr<Session>> OpenSession();
+
+ private:
+  void Prepare(grpc::ClientContext* context, bool deadline) const;
+  ClientOptions options_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<pb::Isostream::Stub> stub_;
+};
+
+}  // namespace isostream::net

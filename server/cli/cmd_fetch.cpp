@@ -1,0 +1,157 @@
+// `isostream fetch`: asks a running isostreamd for one frame and writes it, decoded, as PLY.
+// The view flags are `extract`'s, so a fetched frame can be compared with a local extraction.
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "client/net/session_client.h"
+#include "server/cli/cli_common.h"
+#include "server/cli/commands.h"
+#include "shared/ply_io.h"
+
+namespace isostream::cli {
+namespace {
+
+namespace pb = ::isostream::v1;
+
+struct FetchArgs {
+  std::string server = "127.0.0.1:7878";
+  std::string volume;
+  ViewArgs view;
+  std::string token;
+  std::string codec = "draco";
+  std::string tls_ca;
+  bool progressive = false;
+  std::string output;
+  bool stats = false;
+};
+
+// The message for a failed call, with a hint where the code alone says little.
+std::string Explain(const absl::Status& s, const FetchArgs& args) {
+  std::string m(s.message());
+  switch (s.code()) {
+    case absl::StatusCode::kUnavailable:
+      return "cannot reach isostreamd at " + args.server + " (" + m + ")";
+    case absl::StatusCode::kUnauthenticated:
+      return "the server refused the token (" + m + "); pass --token";
+    case absl::StatusCode::kNotFound:
+      return m;
+    case absl::StatusCode::kDeadlineExceeded:
+      return "the server did not answer in time (" + m + ")";
+    default:
+      return std::string(absl::StatusCodeToString(s.code())) + ": " + m;
+  }
+}
+
+pb::ViewRequest ToViewRequest(const ExtractRequest& r, const FetchArgs& args) {
+  pb::ViewRequest v;
+  v.set_volume(args.volume);
+  v.set_request_id(1);
+  for (float iso : r.isovalues) {
+    auto* s = v.add_surfaces();
+    s->set_isovalue(iso);
+    s->set_a(1.0f);
+  }
+  if (r.budget > 0)
+    v.set_triangle_budget(r.budget);
+  else
+    v.set_eps(r.eps);
+  auto* cam = v.mutable_camera();
+  if (r.view.orthographic) {
+    // The daemon looks along target - eye for orthographic views.
+    cam->set_projection(pb::ORTHOGRAPHIC);
+    cam->mutable_target()->set_x(r.view.direction.x);
+    cam->mutable_target()->set_y(r.view.direction.y);
+    cam->mutable_target()->set_z(r.view.direction.z);
+  } else {
+    cam->set_projection(pb::PERSPECTIVE);
+    cam->mutable_eye()->set_x(r.view.eye.x);
+    cam->mutable_eye()->set_y(r.view.eye.y);
+    cam->mutable_eye()->set_z(r.view.eye.z);
+  }
+  cam->mutable_up()->set_y(1);
+  v.set_codec(args.codec == "raw" ? pb::RAW : pb::DRACO);
+  v.set_normals(r.normals == NormalMode::kFlat ? pb::FLAT : pb::SMOOTH);
+  v.set_unordered(r.order == DrawOrder::kNone);
+  v.set_progressive(args.progressive);
+  return v;
+}
+
+int RunFetch(const FetchArgs& args) {
+  auto fail = [](const std::string& m, int code) {
+    std::cerr << "isostream fetch: " << m << "\n";
+    return code;
+  };
+  if (args.output.size() < 4 || args.output.compare(args.output.size() - 4, 4, ".ply") != 0)
+    return fail("-o must end in .ply, got '" + args.output + "'", 2);
+  net::ClientOptions options;
+  options.address = args.server;
+  options.token = args.token;
+  if (!args.tls_ca.empty()) {
+    std::ifstream in(args.tls_ca);
+    if (!in) return fail("cannot read --tls-ca '" + args.tls_ca + "'", 2);
+    std::stringstream s;
+    s << in.rdbuf();
+    options.tls_ca_pem = s.str();
+  }
+  auto client = net::Client::Connect(options);
+  if (!client.ok()) return fail(std::string(client.status().message()), 1);
+
+  // The default view (no --eye, no --view-dir) depends on the volume's bounds, which only the
+  // server knows; ask for them only then.
+  Volume bounds;
+  if (args.view.eye.empty() && args.view.view_dir.empty()) {
+    auto info = (*client)->GetVolumeInfo(args.volume, 1);
+    if (!info.ok()) return fail(Explain(info.status(), args), 1);
+    for (int a = 0; a < 3 && a < info->dims_size(); ++a) bounds.dims[a] = info->dims(a);
+    bounds.spacing = {info->spacing().x(), info->spacing().y(), info->spacing().z()};
+    bounds.origin = {info->origin().x(), info->origin().y(), info->origin().z()};
+  }
+  auto request = MakeRequest(args.view, bounds);
+  if (!request.ok()) return fail(std::string(request.status().message()), 2);
+
+  auto frame = (*client)->Fetch(ToViewRequest(*request, args));
+  if (!frame.ok()) return fail(Explain(frame.status(), args), 1);
+  const absl::Status written = WritePly(frame->mesh, args.output);
+  if (!written.ok()) return fail(std::string(written.message()), 1);
+  if (args.stats) {
+    const pb::FrameStats& s = frame->stats;
+    std::printf("triangles     %lld  (vertices on the server %lld)\n", (long long)s.triangles(),
+                (long long)s.vertices());
+    std::printf("eps used      %g\n", s.eps_used());
+    std::printf("chunks        %d, %lld bytes (%.2f bytes/triangle)\n", frame->chunks,
+                (long long)frame->bytes,
+                s.triangles() > 0 ? double(frame->bytes) / double(s.triangles()) : 0.0);
+    std::printf("ms            extract %.1f  encode %.1f (summed over chunks)  frame %.1f\n",
+                s.extract_ms(), s.encode_ms(), s.frame_ms());
+  }
+  std::fprintf(stderr, "wrote %s: %zu triangles in back-to-front order (eps %g)\n",
+               args.output.c_str(), frame->mesh.triangle_count(), frame->stats.eps_used());
+  return 0;
+}
+
+}  // namespace
+
+CLI::App* AddFetchCommand(CLI::App& app, int* exit_code) {
+  auto* cmd = app.add_subcommand(
+      "fetch", "Ask a running isostreamd for one frame and write it (decoded) as PLY");
+  auto args = std::make_shared<FetchArgs>();
+  cmd->add_option("--server", args->server, "isostreamd address HOST:PORT")->capture_default_str();
+  cmd->add_option("--volume", args->volume,
+                  "catalogue name (or a generator spec such as "
+                  "buckyball:129 when the daemon has no catalogue)")
+      ->required();
+  AddViewOptions(cmd, &args->view);
+  cmd->add_option("--token", args->token, "bearer token, if the daemon requires one");
+  cmd->add_option("--codec", args->codec, "draco (default) or raw")
+      ->check(CLI::IsMember({"draco", "raw"}));
+  cmd->add_option("--tls-ca", args->tls_ca, "PEM root certificates: connect with TLS");
+  cmd->add_flag("--progressive", args->progressive, "let the server send a coarse frame first");
+  cmd->add_option("-o,--output", args->output, "out.ply")->required();
+  cmd->add_flag("--stats", args->stats, "print counts, sizes and timings");
+  cmd->callback([args, exit_code] { *exit_code = RunFetch(*args); });
+  return cmd;
+}
+
+}  // namespace isostream::cli

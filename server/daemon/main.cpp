@@ -1,0 +1,195 @@
+// isostreamd: serves view-ordered, Draco-compressed isosurface frames over gRPC.
+//
+// Settings come from defaults, then --config FILE.json, then flags. It listens on 127.0.0.1
+// unless told otherwise, prints "listening on HOST:PORT" on stdout once it accepts calls (port
+// 0 picks a free port), and on SIGINT/SIGTERM turns its health status to NOT_SERVING, refuses
+// new streams, lets frames in flight finish (bounded wait) and exits 0.
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/security/server_credentials.h>
+#include <signal.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include "server/service/config.h"
+#include "server/service/service.h"
+
+namespace {
+
+using isostream::service::DaemonConfig;
+
+bool ReadFile(const std::string& path, std::string* out) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  std::stringstream s;
+  s << in.rdbuf();
+  *out = s.str();
+  return true;
+}
+
+int Run(const DaemonConfig& config) {
+  std::shared_ptr<grpc::ServerCredentials> creds;
+  if (!config.tls_cert.empty()) {
+    grpc::SslServerCredentialsOptions::PemKeyCertPair pair;
+    if (!ReadFile(config.tls_key, &pair.private_key) ||
+        !ReadFile(config.tls_cert, &pair.cert_chain)) {
+      spdlog::critical("cannot read TLS key '{}' or certificate '{}'", config.tls_key,
+                       config.tls_cert);
+      return 1;
+    }
+    grpc::SslServerCredentialsOptions options;
+    options.pem_key_cert_pairs.push_back(pair);
+    creds = grpc::SslServerCredentials(options);
+  } else {
+    creds = grpc::InsecureServerCredentials();
+    if (config.listen.rfind("127.", 0) != 0 && config.listen.rfind("localhost", 0) != 0 &&
+        config.listen.rfind("[::1]", 0) != 0)
+      spdlog::warn("listening on {} without TLS", config.listen);
+  }
+
+  grpc::EnableDefaultHealthCheckService(true);
+  isostream::service::IsostreamService service(config);
+  grpc::ServerBuilder builder;
+  int port = 0;
+  builder.AddListeningPort(config.listen, creds, &port);
+  builder.RegisterService(&service);
+  // Requests are small; frames go out in chunks below gRPC's default 4 MiB limit.
+  builder.SetMaxReceiveMessageSize(1 << 20);
+  builder.SetMaxSendMessageSize(4 << 20);
+  std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
+  if (!server || port == 0) {
+    spdlog::critical("cannot listen on {}", config.listen);
+    return 1;
+  }
+  const std::string host = config.listen.substr(0, config.listen.rfind(':'));
+  std::printf("listening on %s:%d\n", host.c_str(), port);
+  std::fflush(stdout);
+  spdlog::info("isostreamd listening on {}:{} ({}, {} catalogue entries{})", host, port,
+               config.tls_cert.empty() ? "plaintext" : "TLS", config.volumes.size(),
+               config.token.empty() ? "" : ", bearer token required");
+
+  // SIGINT/SIGTERM were blocked before any thread started; wait for one here.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  int sig = 0;
+  sigwait(&signals, &sig);
+  spdlog::info("{}: stopping (health NOT_SERVING, finishing frames in flight)",
+               sig == SIGINT ? "SIGINT" : "SIGTERM");
+
+  if (auto* health = server->GetHealthCheckService()) health->SetServingStatus(false);
+  service.BeginShutdown();
+  const auto grace = std::chrono::milliseconds(config.shutdown_grace_ms);
+  if (!service.WaitForStreams(grace)) spdlog::warn("streams still open after the grace period");
+  // Anything still open is cancelled at this deadline.
+  server->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(500));
+  server->Wait();
+  spdlog::info("stopped");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // Block the stop signals in every thread (all threads are created after this), so that one
+  // sigwait sees them and no gRPC or TBB thread is interrupted.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+
+  CLI::App app{
+      "isostreamd: streams view-ordered transparent isosurfaces over gRPC.\n"
+      "Listens on 127.0.0.1:7878 by default (loopback only); --listen 0.0.0.0:PORT with "
+      "--tls-cert/--tls-key to serve a network. Prints 'listening on HOST:PORT' when ready."};
+  DaemonConfig defaults;
+  std::string config_file, listen, cache_dir, tls_cert, tls_key, token, log_level;
+  std::vector<std::string> volumes;
+  int threads = 0, max_sessions = 0, max_isovalues = 0, max_dim = 0, chunk_triangles = 0;
+  int64_t max_triangles = 0, deadline_ms = 0;
+  bool no_cache = false;
+  app.add_option("--config", config_file, "JSON config file (flags override it)");
+  auto* o_listen = app.add_option("--listen", listen,
+                                  "HOST:PORT to listen on (default 127.0.0.1:7878; port 0 picks "
+                                  "a free port and prints it)");
+  auto* o_volume = app.add_option("--volume", volumes,
+                                  "catalogue entry NAME=SPEC (repeatable); without any, built-in "
+                                  "generators are served under their spec names");
+  auto* o_threads = app.add_option("--threads", threads, "worker threads (0: all cores)");
+  auto* o_sessions = app.add_option("--max-sessions", max_sessions,
+                                    "concurrent Session/Extract streams (default 16)");
+  auto* o_tris =
+      app.add_option("--max-triangles", max_triangles, "triangles per frame (default 4000000)");
+  auto* o_iso =
+      app.add_option("--max-isovalues", max_isovalues, "isovalues per request (default 16)");
+  auto* o_deadline =
+      app.add_option("--deadline-ms", deadline_ms, "time limit per frame (default 30000)");
+  auto* o_cache = app.add_option("--cache-dir", cache_dir, "hierarchy cache directory");
+  auto* o_nocache = app.add_flag("--no-cache", no_cache, "never read or write the cache");
+  auto* o_cert = app.add_option("--tls-cert", tls_cert, "PEM certificate chain (enables TLS)");
+  auto* o_key = app.add_option("--tls-key", tls_key, "PEM private key");
+  auto* o_token =
+      app.add_option("--token", token, "require 'authorization: Bearer TOKEN' on every call");
+  auto* o_dim = app.add_option("--max-dim", max_dim,
+                               "largest generator size served without a catalogue (default 257)");
+  auto* o_chunk =
+      app.add_option("--chunk-triangles", chunk_triangles, "triangles per chunk (default 65536)");
+  auto* o_log = app.add_option("--log-level", log_level, "trace|debug|info|warn|error");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+
+  spdlog::set_default_logger(spdlog::stderr_color_mt("isostreamd"));
+  DaemonConfig config = defaults;
+  if (!config_file.empty()) {
+    const absl::Status s = isostream::service::LoadConfigFile(config_file, &config);
+    if (!s.ok()) {
+      std::fprintf(stderr, "isostreamd: %s\n", std::string(s.message()).c_str());
+      return 2;
+    }
+  }
+  if (*o_listen) config.listen = listen;
+  if (*o_volume) {
+    for (const std::string& v : volumes) {
+      const size_t eq = v.find('=');
+      if (eq == std::string::npos || eq == 0 || eq + 1 == v.size()) {
+        std::fprintf(stderr, "isostreamd: --volume wants NAME=SPEC, got '%s'\n", v.c_str());
+        return 2;
+      }
+      config.volumes[v.substr(0, eq)] = v.substr(eq + 1);
+    }
+  }
+  if (*o_threads) config.threads = threads;
+  if (*o_sessions) config.limits.max_sessions = max_sessions;
+  if (*o_tris) config.limits.max_triangles = max_triangles;
+  if (*o_iso) config.limits.max_isovalues = max_isovalues;
+  if (*o_deadline) config.limits.deadline_ms = deadline_ms;
+  if (*o_cache) config.cache_dir = cache_dir;
+  if (*o_nocache) config.no_cache = no_cache;
+  if (*o_cert) config.tls_cert = tls_cert;
+  if (*o_key) config.tls_key = tls_key;
+  if (*o_token) config.token = token;
+  if (*o_dim) config.limits.max_dim = max_dim;
+  if (*o_chunk) config.chunk_triangles = chunk_triangles;
+  if (*o_log) config.log_level = log_level;
+  if (config.first_chunk_triangles > config.chunk_triangles)
+    config.first_chunk_triangles = config.chunk_triangles;
+
+  const absl::Status valid = isostream::service::ValidateConfig(config);
+  if (!valid.ok()) {
+    std::fprintf(stderr, "isostreamd: %s\n", std::string(valid.message()).c_str());
+    return 2;
+  }
+  spdlog::set_level(spdlog::level::from_str(config.log_level));
+  return Run(config);
+}

@@ -1,0 +1,121 @@
+#include "server/service/catalogue.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+
+namespace isostream::service {
+namespace {
+
+bool AllDigits(const std::string& s) {
+  return !s.empty() && s.size() <= 9 &&
+         std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
+}
+
+// "kind:N" or "noise:N:SEED" with a known generator and 2 <= N <= max_dim. Anything else (a
+// path, raw:..., a huge N) is refused, so a client cannot reach the filesystem or make the
+// daemon allocate a large volume.
+absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim) {
+  const size_t colon = spec.find(':');
+  const std::string kind = spec.substr(0, colon);
+  static const char* const kKinds[] = {"cayley", "buckyball", "sphere", "shells", "noise"};
+  const bool known = std::find_if(std::begin(kKinds), std::end(kKinds),
+                                  [&](const char* k) { return kind == k; }) != std::end(kKinds);
+  if (!known || colon == std::string::npos)
+    return absl::NotFoundError("unknown volume '" + spec +
+                               "': this daemon has no catalogue and serves the generators "
+                               "cayley:N, buckyball:N, sphere:N, shells:N, noise:N[:SEED]");
+  std::string rest = spec.substr(colon + 1);
+  const size_t seed_colon = rest.find(':');
+  if (seed_colon != std::string::npos) {
+    if (kind != "noise" || !AllDigits(rest.substr(seed_colon + 1)))
+      return absl::NotFoundError("unknown volume '" + spec + "'");
+    rest = rest.substr(0, seed_colon);
+  }
+  if (!AllDigits(rest)) return absl::NotFoundError("unknown volume '" + spec + "'");
+  const long n = std::stol(rest);
+  if (n < 2 || n > max_dim)
+    return absl::NotFoundError("unknown volume '" + spec + "': generators are served with 2.." +
+                               std::to_string(max_dim) + " samples per axis");
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+void QuantizationFor(const Volume& v, QuantizationBox* box, int* bits) {
+  double lo[3], hi[3], extent = 0, step = INFINITY;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = v.origin[a];
+    hi[a] = v.origin[a] + v.spacing[a] * (v.dims[a] - 1);
+    extent = std::max(extent, hi[a] - lo[a]);
+    step = std::min(step, std::abs(v.spacing[a]));
+  }
+  // The margin keeps vertices on the data boundary inside the box after float rounding (the
+  // encoder rejects positions outside it).
+  const double margin = 1e-4 * extent + 1e-6;
+  for (int a = 0; a < 3; ++a) box->origin[a] = float(std::min(lo[a], hi[a]) - margin);
+  box->range = float(extent + 2 * margin);
+  int b = 8;
+  while (b < 24 && box->range / double((1u << b) - 1) > step / 32) ++b;
+  *bits = b;
+}
+
+VolumeCatalogue::VolumeCatalogue(CatalogueOptions options) : options_(std::move(options)) {}
+
+absl::Status VolumeCatalogue::Check(const std::string& name) const {
+  if (name.empty()) return absl::InvalidArgumentError("no volume named");
+  if (options_.volumes.empty()) return CheckGeneratorSpec(name, options_.max_generator_dim);
+  if (!options_.volumes.count(name))
+    return absl::NotFoundError("unknown volume '" + name + "' (ListVolumes gives the catalogue)");
+  return absl::OkStatus();
+}
+
+absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
+  ISOSTREAM_RETURN_IF_ERROR(Check(name));
+  std::shared_ptr<Entry> entry;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto& e = entries_[name];
+    if (!e) e = std::make_shared<Entry>();
+    entry = e;
+  }
+  std::lock_guard<std::mutex> build_lock(entry->build_mu);
+  if (entry->served) return entry->served;
+  const std::string spec = options_.volumes.empty() ? name : options_.volumes.at(name);
+  HierarchyBuildOptions build;
+  build.threads = options_.build_threads;
+  auto prepared = PrepareVolume(spec, options_.limits, options_.cache, build);
+  if (!prepared.ok()) {
+    spdlog::error("preparing volume '{}' ({}) failed: {}", name, spec,
+                  std::string(prepared.status().message()));
+    // The message names the spec, which the operator wrote: it stays in the log for catalogue
+    // entries and is not shown to clients.
+    if (options_.volumes.empty()) return prepared.status();
+    return absl::Status(prepared.status().code(),
+                        "volume '" + name + "' could not be prepared (see the daemon's log)");
+  }
+  auto served = std::make_shared<ServedVolume>();
+  served->name = name;
+  served->prepared = std::move(*prepared);
+  QuantizationFor(*served->prepared.volume, &served->box, &served->position_bits);
+  served->position_error = PositionErrorBound(served->box, served->position_bits);
+  spdlog::info(
+      "prepared volume '{}': {}x{}x{}, hierarchy {} in {:.0f} ms, {} position bits", name,
+      served->prepared.volume->dims[0], served->prepared.volume->dims[1],
+      served->prepared.volume->dims[2], CacheOutcomeName(served->prepared.cache),
+      1e3 * (served->prepared.load_s + served->prepared.pad_s + served->prepared.hierarchy_s),
+      served->position_bits);
+  entry->served = served;
+  prepared_.fetch_add(1);
+  return entry->served;
+}
+
+std::vector<std::string> VolumeCatalogue::Names() const {
+  std::vector<std::string> names;
+  for (const auto& [name, spec] : options_.volumes) names.push_back(name);
+  return names;
+}
+
+}  // namespace isostream::service

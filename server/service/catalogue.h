@@ -1,0 +1,76 @@
+// The volumes a daemon serves, by name. Clients name catalogue entries only, never paths: the
+// spec behind a name (a file or a generator) comes from the daemon's own configuration. With
+// no catalogue configured, built-in generator specs ("buckyball:129") are accepted as names,
+// up to a size limit, so a daemon serves something with no data at all.
+//
+// Volumes are prepared (loaded, padded, hierarchy built or read from the cache) on first use
+// and kept. Concurrent first requests for one volume wait for a single build.
+#pragma once
+
+#include <atomic>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "server/hierarchy/prepared_volume.h"
+#include "shared/frame_codec.h"
+
+namespace isostream::service {
+
+// A prepared volume plus what frames of it are encoded with.
+struct ServedVolume {
+  std::string name;
+  PreparedVolume prepared;
+  // Positions of every frame are quantized on this one box (the volume's world bounds with a
+  // small margin) so that vertices repeated across chunks and frames decode identically, at
+  // enough bits for 1/64 of the smallest voxel step (see QuantizationFor).
+  QuantizationBox box;
+  int position_bits = 14;
+  float position_error = 0;  // PositionErrorBound(box, position_bits), world units
+};
+
+using ServedVolumePtr = std::shared_ptr<const ServedVolume>;
+
+struct CatalogueOptions {
+  std::map<std::string, std::string> volumes;  // empty: generators by spec name
+  int max_generator_dim = 257;
+  VolumeLimits limits;
+  HierarchyCacheOptions cache;
+  int build_threads = 0;
+};
+
+// The box and bit count for a volume's frames: bits = the fewest that make the quantization
+// step at most 1/32 of the smallest sample spacing, so the error (half a step) is at most 1/64
+// of a voxel. 129^3 at unit spacing: 13 bits; 513^3: 15 bits.
+void QuantizationFor(const Volume& volume, QuantizationBox* box, int* bits);
+
+class VolumeCatalogue {
+ public:
+  explicit VolumeCatalogue(CatalogueOptions options);
+
+  // OK if `name` may be asked for (it may still fail to load); NOT_FOUND otherwise, with a
+  // message saying what names are accepted.
+  absl::Status Check(const std::string& name) const;
+
+  // Prepares on first use; later calls return the same object.
+  absl::StatusOr<ServedVolumePtr> Get(const std::string& name);
+
+  std::vector<std::string> Names() const;
+  bool generators_allowed() const { return options_.volumes.empty(); }
+  int max_generator_dim() const { return options_.max_generator_dim; }
+  int prepared_count() const { return prepared_.load(); }
+
+ private:
+  struct Entry {
+    std::mutex build_mu;  // held while preparing, so one build per volume
+    ServedVolumePtr served;
+  };
+  CatalogueOptions options_;
+  mutable std::mutex mu_;
+  std::map<std::string, std::shared_ptr<Entry>> entries_;
+  std::atomic<int> prepared_{0};
+};
+
+}  // namespace isostream::service

@@ -1,0 +1,119 @@
+#include "server/service/config.h"
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+namespace isostream::service {
+namespace {
+
+using nlohmann::json;
+
+absl::Status CheckKeys(const json& object, const std::set<std::string>& known,
+                       const std::string& where) {
+  if (!object.is_object()) return absl::InvalidArgumentError(where + " must be an object");
+  for (auto it = object.begin(); it != object.end(); ++it)
+    if (!known.count(it.key()))
+      return absl::InvalidArgumentError("unknown key '" + where + it.key() + "'");
+  return absl::OkStatus();
+}
+
+// Reads object[key] into *out when present; a wrong type names the key.
+template <class T>
+absl::Status Get(const json& object, const char* key, const std::string& where, T* out) {
+  auto it = object.find(key);
+  if (it == object.end()) return absl::OkStatus();
+  try {
+    *out = it->get<T>();
+  } catch (const json::exception&) {
+    return absl::InvalidArgumentError("'" + where + key + "' has the wrong type");
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Parse(const json& j, DaemonConfig* c) {
+  ISOSTREAM_RETURN_IF_ERROR(
+      CheckKeys(j,
+                {"listen", "threads", "cache_dir", "no_cache", "volumes", "token", "tls", "limits",
+                 "frames", "log_level", "shutdown_grace_ms"},
+                ""));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "listen", "", &c->listen));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "threads", "", &c->threads));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "cache_dir", "", &c->cache_dir));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "no_cache", "", &c->no_cache));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "volumes", "", &c->volumes));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "token", "", &c->token));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "log_level", "", &c->log_level));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "shutdown_grace_ms", "", &c->shutdown_grace_ms));
+  if (j.contains("tls")) {
+    const json& t = j["tls"];
+    ISOSTREAM_RETURN_IF_ERROR(CheckKeys(t, {"cert", "key"}, "tls."));
+    ISOSTREAM_RETURN_IF_ERROR(Get(t, "cert", "tls.", &c->tls_cert));
+    ISOSTREAM_RETURN_IF_ERROR(Get(t, "key", "tls.", &c->tls_key));
+  }
+  if (j.contains("limits")) {
+    const json& l = j["limits"];
+    ISOSTREAM_RETURN_IF_ERROR(
+        CheckKeys(l, {"max_sessions", "max_triangles", "max_isovalues", "deadline_ms", "max_dim"},
+                  "limits."));
+    ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_sessions", "limits.", &c->limits.max_sessions));
+    ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_triangles", "limits.", &c->limits.max_triangles));
+    ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_isovalues", "limits.", &c->limits.max_isovalues));
+    ISOSTREAM_RETURN_IF_ERROR(Get(l, "deadline_ms", "limits.", &c->limits.deadline_ms));
+    ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_dim", "limits.", &c->limits.max_dim));
+  }
+  if (j.contains("frames")) {
+    const json& f = j["frames"];
+    ISOSTREAM_RETURN_IF_ERROR(CheckKeys(
+        f, {"chunk_triangles", "first_chunk_triangles", "coarse_triangles", "max_queued_chunks"},
+        "frames."));
+    ISOSTREAM_RETURN_IF_ERROR(Get(f, "chunk_triangles", "frames.", &c->chunk_triangles));
+    ISOSTREAM_RETURN_IF_ERROR(
+        Get(f, "first_chunk_triangles", "frames.", &c->first_chunk_triangles));
+    ISOSTREAM_RETURN_IF_ERROR(Get(f, "coarse_triangles", "frames.", &c->coarse_triangles));
+    ISOSTREAM_RETURN_IF_ERROR(Get(f, "max_queued_chunks", "frames.", &c->max_queued_chunks));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
+  std::ifstream in(path);
+  if (!in) return absl::NotFoundError("cannot open config file '" + path + "'");
+  std::stringstream text;
+  text << in.rdbuf();
+  const json j = json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) return absl::InvalidArgumentError("'" + path + "' is not valid JSON");
+  const absl::Status s = Parse(j, config);
+  if (!s.ok()) return absl::InvalidArgumentError(path + ": " + std::string(s.message()));
+  return absl::OkStatus();
+}
+
+absl::Status ValidateConfig(const DaemonConfig& c) {
+  auto bad = [](const std::string& m) { return absl::InvalidArgumentError(m); };
+  if (c.threads < 0 || c.threads > 1024) return bad("threads must be in 0..1024");
+  if (c.limits.max_sessions < 1) return bad("max_sessions must be at least 1");
+  if (c.limits.max_triangles < 1) return bad("max_triangles must be at least 1");
+  if (c.limits.max_isovalues < 1 || c.limits.max_isovalues > 16)
+    return bad("max_isovalues must be in 1..16");
+  if (c.limits.deadline_ms < 1) return bad("deadline_ms must be at least 1");
+  if (c.limits.max_dim < 2 || c.limits.max_dim > 4097) return bad("max_dim must be in 2..4097");
+  if (c.tls_cert.empty() != c.tls_key.empty()) return bad("TLS needs both a certificate and a key");
+  // Chunks must stay under gRPC's 4 MiB message limit: a Draco chunk needs at most about 40
+  // bytes per triangle (no shared vertices, indices stored plainly); raw chunks are cut at
+  // kMaxRawChunkTriangles regardless.
+  if (c.chunk_triangles < 256 || c.chunk_triangles > 65536)
+    return bad("chunk_triangles must be in 256..65536");
+  if (c.first_chunk_triangles < 256 || c.first_chunk_triangles > c.chunk_triangles)
+    return bad("first_chunk_triangles must be in 256..chunk_triangles");
+  if (c.coarse_triangles < 100) return bad("coarse_triangles must be at least 100");
+  if (c.max_queued_chunks < 2 || c.max_queued_chunks > 256)
+    return bad("max_queued_chunks must be in 2..256");
+  for (const auto& [name, spec] : c.volumes)
+    if (name.empty() || spec.empty()) return bad("catalogue names and specs must not be empty");
+  return absl::OkStatus();
+}
+
+}  // namespace isostream::service

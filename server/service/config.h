@@ -1,0 +1,55 @@
+// isostreamd's settings: defaults here, then the JSON config file, then command-line flags.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+
+#include "shared/status.h"
+
+namespace isostream::service {
+
+struct Limits {
+  int max_sessions = 16;              // concurrent Session and Extract streams
+  int64_t max_triangles = 4'000'000;  // per frame
+  int max_isovalues = 16;
+  int64_t deadline_ms = 30'000;  // per frame, extraction and encoding
+  int max_dim = 257;             // samples per axis of a generator served without a catalogue
+};
+
+struct DaemonConfig {
+  std::string listen = "127.0.0.1:7878";
+  int threads = 0;        // extraction threads per frame and encoder threads; 0: all cores
+  std::string cache_dir;  // empty: the default cache directory
+  bool no_cache = false;
+  Limits limits;
+  // Catalogue: name -> volume spec (generator, .vdb, .nii, raw:...). Clients see names only.
+  std::map<std::string, std::string> volumes;
+  std::string tls_cert, tls_key;  // PEM files; both or neither
+  std::string token;              // bearer token; empty: no auth
+  // Frames are cut into chunks of at most this many triangles; the first chunks of a frame are
+  // smaller (first_chunk_triangles, doubling) so that the first one leaves early.
+  int chunk_triangles = 65536;
+  int first_chunk_triangles = 8192;
+  int coarse_triangles = 20000;  // budget of the coarse frame of a progressive request
+  int max_queued_chunks = 8;     // per stream: encoded or encoding, not yet written
+  int shutdown_grace_ms = 5000;  // how long SIGTERM waits for frames in flight
+  std::string log_level = "info";
+};
+
+// Reads a JSON config file over `config` (keys absent from the file keep their value):
+//   {"listen": "127.0.0.1:7878", "threads": 2, "cache_dir": "/var/cache/isostream",
+//    "volumes": {"head": "/data/head.nii.gz"}, "token": "...",
+//    "tls": {"cert": "server.pem", "key": "server.key"},
+//    "limits": {"max_sessions": 16, "max_triangles": 4000000, "max_isovalues": 16,
+//               "deadline_ms": 30000, "max_dim": 257},
+//    "frames": {"chunk_triangles": 65536, "first_chunk_triangles": 8192,
+//               "coarse_triangles": 20000, "max_queued_chunks": 8},
+//    "log_level": "info"}
+// Unknown keys and wrong types are errors naming the key.
+absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config);
+
+// Range checks after all sources are merged.
+absl::Status ValidateConfig(const DaemonConfig& config);
+
+}  // namespace isostream::service

@@ -1,0 +1,298 @@
+#include "server/service/frame_producer.h"
+
+#include <cmath>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <vector>
+
+namespace isostream::service {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+// Copies triangles [first, first + count) of `mesh` and the vertices they use into `out`.
+// The copy is what lets encoding run after the extractor's callback returns: the extractor
+// keeps appending to (and reallocating) its mesh. `stamp`/`slot` persist across chunks so the
+// remap table is never cleared, only grown.
+void Gather(const OrderedMesh& mesh, size_t first, size_t count, uint32_t chunk_stamp,
+            std::vector<uint32_t>* stamp, std::vector<uint32_t>* slot, OrderedMesh* out) {
+  const bool normals = mesh.normals.size() == mesh.positions.size();
+  if (stamp->size() < mesh.vertex_count()) {
+    stamp->resize(mesh.vertex_count(), 0);
+    slot->resize(mesh.vertex_count(), 0);
+  }
+  out->clear();
+  out->triangles.resize(3 * count);
+  out->surface.assign(mesh.surface.begin() + first, mesh.surface.begin() + first + count);
+  out->positions.reserve(3 * count);
+  if (normals) out->normals.reserve(3 * count);
+  const uint32_t* tri = mesh.triangles.data() + 3 * first;
+  for (size_t i = 0; i < 3 * count; ++i) {
+    const uint32_t v = tri[i];
+    if ((*stamp)[v] != chunk_stamp) {
+      (*stamp)[v] = chunk_stamp;
+      (*slot)[v] = uint32_t(out->vertex_count());
+      out->positions.insert(out->positions.end(), &mesh.positions[3 * v],
+                            &mesh.positions[3 * v] + 3);
+      if (normals)
+        out->normals.insert(out->normals.end(), &mesh.normals[3 * v], &mesh.normals[3 * v] + 3);
+    }
+    out->triangles[i] = (*slot)[v];
+  }
+}
+
+// The state one frame shares between the extractor's callback, the encoder jobs and the
+// producer's thread. Lives on the producer's stack: the producer waits for every encoder job
+// before returning.
+struct FrameState {
+  std::mutex mu;
+  std::condition_variable cv;
+  std::vector<std::optional<pb::FrameChunk>> chunks;  // by index; emptied when released
+  size_t released = 0;                                // chunks [0, released) are on the sink
+  size_t encoding = 0;                                // encoder jobs not yet finished
+  double encode_ms = 0;                               // summed over chunks
+  int64_t bytes = 0;
+  absl::Status error;       // first internal reason to stop (the frame is then abandoned)
+  bool superseded = false;  // the sink refused a chunk: a newer view took over
+};
+
+}  // namespace
+
+absl::StatusOr<ExtractRequest> ToExtractRequest(const pb::ViewRequest& v, const Limits& limits,
+                                                int threads) {
+  ExtractRequest r;
+  if (v.volume().empty()) return absl::InvalidArgumentError("no volume named");
+  if (v.surfaces_size() == 0)
+    return absl::InvalidArgumentError("no surfaces: give at least one isovalue");
+  if (v.surfaces_size() > limits.max_isovalues)
+    return absl::ResourceExhaustedError("at most " + std::to_string(limits.max_isovalues) +
+                                        " isovalues per request, got " +
+                                        std::to_string(v.surfaces_size()));
+  for (const auto& s : v.surfaces()) r.isovalues.push_back(s.isovalue());
+  switch (v.accuracy_case()) {
+    case pb::ViewRequest::kEps:
+      r.eps = v.eps();
+      break;
+    case pb::ViewRequest::kTriangleBudget:
+      if (v.triangle_budget() <= 0)
+        return absl::InvalidArgumentError("triangle budget must be positive");
+      if (v.triangle_budget() > limits.max_triangles)
+        return absl::ResourceExhaustedError(
+            "triangle budget " + std::to_string(v.triangle_budget()) +
+            " is over this daemon's limit of " + std::to_string(limits.max_triangles));
+      r.budget = v.triangle_budget();
+      break;
+    default:
+      return absl::InvalidArgumentError("set eps or triangle_budget");
+  }
+  if (!pb::Codec_IsValid(v.codec())) return absl::InvalidArgumentError("unknown codec");
+  if (!pb::Projection_IsValid(v.camera().projection()))
+    return absl::InvalidArgumentError("unknown projection");
+  if (!pb::Normals_IsValid(v.normals())) return absl::InvalidArgumentError("unknown normals mode");
+  const auto& eye = v.camera().eye();
+  const auto& target = v.camera().target();
+  if (v.camera().projection() == pb::ORTHOGRAPHIC) {
+    r.view.orthographic = true;
+    r.view.direction = {target.x() - eye.x(), target.y() - eye.y(), target.z() - eye.z()};
+  } else {
+    r.view.eye = {eye.x(), eye.y(), eye.z()};
+  }
+  r.order = v.unordered() ? DrawOrder::kNone : DrawOrder::kBackToFront;
+  r.normals = v.normals() == pb::FLAT ? NormalMode::kFlat : NormalMode::kSmooth;
+  r.threads = threads;
+  ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
+  return r;
+}
+
+absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewRequest& view,
+                                const ExtractRequest& request, uint64_t generation,
+                                std::atomic<bool>* cancel, ChunkSink* sink,
+                                Clock::time_point received) const {
+  if (view.progressive()) {
+    const int64_t coarse = settings_.coarse_triangles;
+    bool want_coarse;
+    if (request.budget > 0) {
+      want_coarse = request.budget > coarse;
+    } else {
+      // A count that stops past the coarse budget is cheap, and avoids sending a "coarse"
+      // frame finer than the requested one.
+      auto n = CountTriangles(*volume.prepared.hierarchy, volume.prepared.grid_to_world, request,
+                              request.eps, coarse + 1);
+      want_coarse = !n.ok() || *n > coarse;
+    }
+    if (want_coarse) {
+      ExtractRequest c = request;
+      c.budget = coarse;
+      ISOSTREAM_RETURN_IF_ERROR(
+          ProduceFrame(volume, view, c, true, generation, cancel, sink, received));
+    }
+  }
+  return ProduceFrame(volume, view, request, false, generation, cancel, sink, received);
+}
+
+absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
+                                         const ExtractRequest& request, bool coarse,
+                                         uint64_t generation, std::atomic<bool>* cancel,
+                                         ChunkSink* sink, Clock::time_point received) const {
+  counters_->frames_started.fetch_add(1);
+  const auto deadline = received + std::chrono::milliseconds(settings_.deadline_ms);
+  const bool raw = view.codec() == pb::RAW;
+  const size_t max_chunk = size_t(raw ? std::min(settings_.chunk_triangles, kMaxRawChunkTriangles)
+                                      : settings_.chunk_triangles);
+  CodecOptions codec;
+  codec.position_bits = volume.position_bits;
+  codec.normal_bits = 10;
+  codec.compress_connectivity = true;
+  codec.position_box = volume.box;
+
+  FrameState state;
+  std::vector<uint32_t> stamp, slot;
+  size_t cut_end = 0;  // triangles [0, cut_end) are cut into chunks
+
+  // Stops the frame for an internal reason; the first reason wins.
+  auto stop = [&](absl::Status why) {
+    if (state.error.ok()) state.error = std::move(why);
+    cancel->store(true);
+    state.cv.notify_all();
+  };
+
+  // Hands released chunks to the sink in index order. Called with state.mu held.
+  auto release_locked = [&] {
+    while (state.released < state.chunks.size() && state.chunks[state.released]) {
+      pb::FrameChunk chunk = std::move(*state.chunks[state.released]);
+      state.chunks[state.released].reset();
+      ++state.released;
+      if (chunk.last()) {
+        pb::FrameStats* st = chunk.mutable_stats();
+        st->set_encode_ms(state.encode_ms);
+        st->set_bytes(state.bytes);
+        st->set_frame_ms(MsSince(received));
+      }
+      if (!state.superseded && !sink->Push(generation, std::move(chunk))) {
+        state.superseded = true;
+        cancel->store(true);
+      }
+    }
+    state.cv.notify_all();
+  };
+
+  auto chunk_size = [&](size_t index) {
+    return std::min(max_chunk, size_t(settings_.first_chunk_triangles)
+                                   << std::min<size_t>(index, 20));
+  };
+
+  // Cuts triangles [cut_end, cut_end + count) into the next chunk and queues its encoding.
+  auto cut = [&](const OrderedMesh& mesh, size_t count, bool last, const ExtractStats* stats) {
+    auto piece = std::make_shared<OrderedMesh>();
+    size_t index;
+    {
+      std::lock_guard<std::mutex> lock(state.mu);
+      index = state.chunks.size();
+      state.chunks.emplace_back();
+      ++state.encoding;
+    }
+    Gather(mesh, cut_end, count, uint32_t(index + 1), &stamp, &slot, piece.get());
+    auto header = std::make_shared<pb::FrameChunk>();
+    header->set_frame_id(view.request_id());
+    header->set_coarse(coarse);
+    header->set_chunk_index(uint32_t(index));
+    header->set_first_triangle(cut_end);
+    header->set_triangle_count(uint32_t(count));
+    if (last) {
+      header->set_last(true);
+      header->set_chunk_count(uint32_t(index + 1));
+      pb::FrameStats* st = header->mutable_stats();
+      st->set_triangles(stats->triangles);
+      st->set_vertices(stats->vertices);
+      st->set_eps_used(stats->eps_used);
+      st->set_extract_ms(stats->total_ms);
+      st->set_chunk_count(int32_t(index + 1));
+    }
+    cut_end += count;
+    encoders_->Submit([&state, &release_locked, &stop, piece, header, index, raw, codec] {
+      const Clock::time_point t = Clock::now();
+      std::string bytes;
+      absl::Status s = raw ? EncodeChunkRaw(*piece, 0, piece->triangle_count(), &bytes)
+                           : EncodeChunk(*piece, 0, piece->triangle_count(), codec, &bytes);
+      if (s.ok() && bytes.size() > kMaxChunkBytes)
+        s = absl::InternalError("encoded chunk of " + std::to_string(bytes.size()) +
+                                " bytes is over the message limit");
+      const double ms = MsSince(t);
+      std::lock_guard<std::mutex> lock(state.mu);
+      --state.encoding;
+      if (!s.ok()) {
+        stop(absl::InternalError("encoding a chunk failed: " + std::string(s.message())));
+        return;
+      }
+      state.encode_ms += ms;
+      state.bytes += int64_t(bytes.size());
+      header->set_data(std::move(bytes));
+      state.chunks[index] = std::move(*header);
+      release_locked();
+    });
+  };
+
+  // Waits until the frame has room for another chunk (or must stop). Polls the sink's queue
+  // on a short period: the sink drains on gRPC's threads, which do not notify this frame.
+  auto wait_for_room = [&] {
+    std::unique_lock<std::mutex> lock(state.mu);
+    for (;;) {
+      if (cancel->load()) return false;
+      if (Clock::now() > deadline) {
+        stop(absl::DeadlineExceededError("frame took longer than the daemon's deadline of " +
+                                         std::to_string(settings_.deadline_ms) + " ms"));
+        return false;
+      }
+      const size_t outstanding = state.chunks.size() - state.released + sink->Queued();
+      if (outstanding < size_t(settings_.max_queued_chunks)) return true;
+      state.cv.wait_for(lock, std::chrono::milliseconds(1));
+    }
+  };
+
+  ExtractObserver observer;
+  observer.cancel = cancel;
+  observer.on_ready = [&](const OrderedMesh& mesh, size_t /*first*/, size_t end) {
+    if (cancel->load()) return;
+    if (int64_t(end) > settings_.max_triangles) {
+      std::lock_guard<std::mutex> lock(state.mu);
+      stop(absl::ResourceExhaustedError(
+          "the frame has more than " + std::to_string(settings_.max_triangles) +
+          " triangles (this daemon's limit): raise eps or give a triangle budget"));
+      return;
+    }
+    while (end - cut_end >= chunk_size(state.chunks.size())) {
+      if (!wait_for_room()) return;
+      cut(mesh, chunk_size(state.chunks.size()), false, nullptr);
+    }
+  };
+
+  auto result =
+      Extract(*volume.prepared.hierarchy, volume.prepared.grid_to_world, request, &observer);
+  bool last_cut = false;
+  if (result.ok() && !cancel->load() && wait_for_room()) {
+    cut(result->mesh, result->mesh.triangle_count() - cut_end, true, &result->stats);
+    last_cut = true;
+  }
+
+  std::unique_lock<std::mutex> lock(state.mu);
+  state.cv.wait(lock, [&] { return state.encoding == 0; });
+  const absl::Status error = state.error;
+  // A newer view may set `cancel` after the last chunk went out: the frame still counts.
+  const bool complete =
+      last_cut && error.ok() && !state.superseded && state.released == state.chunks.size();
+  lock.unlock();
+  if (complete) return absl::OkStatus();
+  if (!error.ok()) return error;
+  if (!result.ok() && result.status().code() != absl::StatusCode::kCancelled)
+    return result.status();
+  counters_->frames_cancelled.fetch_add(1);
+  return absl::CancelledError("frame cancelled");
+}
+
+}  // namespace isostream::service

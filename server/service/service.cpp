@@ -1,0 +1,579 @@
+#include "server/service/service.h"
+
+#include <spdlog/spdlog.h>
+
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include "server/service/catalogue.h"
+#include "server/service/frame_producer.h"
+#include "server/service/stats.h"
+#include "server/service/worker_pool.h"
+
+namespace isostream::service {
+
+using Clock = std::chrono::steady_clock;
+
+grpc::Status ToGrpc(const absl::Status& s) {
+  // absl and gRPC share the canonical code numbering.
+  return grpc::Status(grpc::StatusCode(int(s.code())), std::string(s.message()));
+}
+
+class StreamBase;
+
+struct ServiceCore {
+  explicit ServiceCore(const DaemonConfig& c)
+      : config(c),
+        catalogue([&] {
+          CatalogueOptions o;
+          o.volumes = c.volumes;
+          o.max_generator_dim = c.limits.max_dim;
+          o.limits.max_dim = c.volumes.empty() ? c.limits.max_dim : VolumeLimits{}.max_dim;
+          if (!c.no_cache) o.cache.dir = c.cache_dir.empty() ? DefaultCacheDir() : c.cache_dir;
+          o.build_threads = c.threads;
+          return o;
+        }()),
+        encoders(std::make_unique<WorkerPool>(
+            c.threads > 0 ? c.threads : int(std::max(1u, std::thread::hardware_concurrency())))),
+        // One thread per admissible stream: a frame job blocks while its client reads slowly,
+        // and must not hold up other streams' frames.
+        frames(std::make_unique<WorkerPool>(c.limits.max_sessions + 1)),
+        producer(
+            [&] {
+              FrameSettings f;
+              f.chunk_triangles = c.chunk_triangles;
+              f.first_chunk_triangles = c.first_chunk_triangles;
+              f.max_queued_chunks = c.max_queued_chunks;
+              f.coarse_triangles = c.coarse_triangles;
+              f.max_triangles = c.limits.max_triangles;
+              f.deadline_ms = c.limits.deadline_ms;
+              return f;
+            }(),
+            encoders.get(), &counters) {}
+
+  bool Authorized(const grpc::CallbackServerContext* ctx) const {
+    if (config.token.empty()) return true;
+    const auto& md = ctx->client_metadata();
+    auto it = md.find("authorization");
+    if (it == md.end()) return false;
+    const std::string given(it->second.data(), it->second.size());
+    const std::string expected = "Bearer " + config.token;
+    // Constant time in the token's content, so timing does not reveal a matching prefix.
+    unsigned diff = given.size() != expected.size();
+    for (size_t i = 0; i < std::min(given.size(), expected.size()); ++i)
+      diff |= unsigned(given[i] ^ expected[i]);
+    return diff == 0;
+  }
+
+  // Takes a stream slot, or says why not.
+  absl::Status Admit() {
+    if (shutting_down.load()) return absl::UnavailableError("the server is shutting down");
+    int64_t open = counters.sessions_open.load();
+    do {
+      if (open >= config.limits.max_sessions) {
+        counters.sessions_rejected.fetch_add(1);
+        return absl::ResourceExhaustedError("the server has its maximum of " +
+                                            std::to_string(config.limits.max_sessions) +
+                                            " sessions open; try again later");
+      }
+    } while (!counters.sessions_open.compare_exchange_weak(open, open + 1));
+    counters.sessions_total.fetch_add(1);
+    return absl::OkStatus();
+  }
+
+  void Register(StreamBase* s, std::weak_ptr<StreamBase> w) {
+    std::lock_guard<std::mutex> lock(streams_mu);
+    streams[s] = std::move(w);
+  }
+  void Unregister(StreamBase* s, bool admitted) {
+    std::lock_guard<std::mutex> lock(streams_mu);
+    streams.erase(s);
+    if (admitted) {
+      counters.sessions_open.fetch_sub(1);
+      counters.sessions_closed.fetch_add(1);
+    }
+    streams_cv.notify_all();
+  }
+
+  DaemonConfig config;
+  ServerCounters counters;
+  VolumeCatalogue catalogue;
+  std::atomic<bool> shutting_down{false};
+  std::mutex streams_mu;
+  std::condition_variable streams_cv;
+  std::map<StreamBase*, std::weak_ptr<StreamBase>> streams;
+  // Frame jobs wait for encoder jobs: the frame pool is declared last so it is destroyed
+  // (drained and joined) first.
+  std::unique_ptr<WorkerPool> encoders;
+  std::unique_ptr<WorkerPool> frames;
+  FrameProducer producer;
+};
+
+// What every frame stream shares, independent of its gRPC reactor type.
+class StreamBase : public ChunkSink, public std::enable_shared_from_this<StreamBase> {
+ public:
+  virtual ~StreamBase() = default;
+  virtual void Drain() = 0;
+  virtual void RunJobs() = 0;
+};
+
+// A stream of frame chunks: the write queue (one write in flight), the latest-view-wins frame
+// job, and finishing exactly once after the last write. Reactor is ServerWriteReactor (Extract)
+// or ServerBidiReactor (Session); both have the same write and finish calls.
+//
+// Ownership: the reactor owns itself through `self_` until gRPC calls OnDone; frame jobs hold
+// their own reference, so whichever of the two finishes last destroys the stream.
+//
+// Locking: every state change happens under mu_; gRPC calls (StartWrite, Finish, StartRead)
+// are made after releasing it, because gRPC may run a reaction inline on the calling thread.
+template <class Reactor>
+class ChunkStream : public Reactor, public StreamBase {
+ public:
+  ChunkStream(ServiceCore* core, grpc::CallbackServerContext* context)
+      : core_(core), context_(context), peer_(context->peer()) {}
+
+  // Creates a stream owned by itself (until OnDone) and registered for shutdown.
+  template <class Derived, class... Args>
+  static Derived* Create(ServiceCore* core, Args&&... args) {
+    auto s = std::make_shared<Derived>(core, std::forward<Args>(args)...);
+    s->self_ = s;
+    core->Register(s.get(), s);
+    return s.get();
+  }
+
+  bool Push(uint64_t generation, pb::FrameChunk&& chunk) override {
+    bool start;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (finishing_ || generation != generation_) return false;
+      queue_.push_back(std::move(chunk));
+      start = TakeNextWriteLocked();
+    }
+    if (start) this->StartWrite(&writing_);
+    return true;
+  }
+
+  size_t Queued() const override {
+    std::lock_guard<std::mutex> lock(mu_);
+    return queue_.size() + (write_in_flight_ ? 1 : 0);
+  }
+
+  void OnWriteDone(bool ok) override {
+    if (ok) {
+      core_->counters.chunks_sent.fetch_add(1);
+      core_->counters.bytes_sent.fetch_add(int64_t(writing_.data().size()));
+      if (writing_.last()) core_->counters.frames_sent.fetch_add(1);
+    }
+    bool start;
+    std::optional<grpc::Status> finish;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      write_in_flight_ = false;
+      // A failed write means the stream is broken (the client went away).
+      if (!ok) FailLocked(grpc::Status(grpc::StatusCode::CANCELLED, "write failed"));
+      start = TakeNextWriteLocked();
+      CompleteIfIdleLocked();
+      finish = TakeFinishLocked();
+    }
+    if (start) this->StartWrite(&writing_);
+    if (finish) this->Finish(*finish);
+  }
+
+  void OnCancel() override {
+    std::optional<grpc::Status> finish;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      FailLocked(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client"));
+      finish = TakeFinishLocked();
+    }
+    if (finish) this->Finish(*finish);
+  }
+
+  void OnDone() override {
+    core_->Unregister(this, admitted_);
+    std::shared_ptr<StreamBase> keep = std::move(self_);  // may destroy *this on return
+  }
+
+  void Drain() override {
+    std::optional<grpc::Status> finish;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      draining_ = true;
+      CompleteIfIdleLocked();
+      finish = TakeFinishLocked();
+    }
+    if (finish) this->Finish(*finish);
+  }
+
+  // Runs the pending view, then any view that arrived meanwhile (only the latest is kept),
+  // on a frame-pool thread. One job per stream at a time.
+  void RunJobs() override {
+    for (;;) {
+      pb::ViewRequest view;
+      ExtractRequest request;
+      Clock::time_point received;
+      uint64_t generation;
+      std::shared_ptr<std::atomic<bool>> cancel;
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (!pending_ || finishing_) {
+          pending_.reset();
+          job_running_ = false;
+          CompleteIfIdleLocked();
+          break;
+        }
+        view = std::move(pending_->view);
+        request = std::move(pending_->request);
+        received = pending_->received;
+        pending_.reset();
+        generation = generation_;
+        cancel = cancel_;
+      }
+      const absl::Status s = RunView(view, request, generation, cancel.get(), received);
+      if (!s.ok()) {
+        std::lock_guard<std::mutex> lock(mu_);
+        // CANCELLED from a newer view or from the client leaving is not an error of the
+        // stream; anything else ends it with that status.
+        const bool superseded = generation != generation_;
+        if (!superseded && s.code() != absl::StatusCode::kCancelled) {
+          spdlog::info("{}: request {} failed: {}", peer_, view.request_id(), s.ToString());
+          FailLocked(ToGrpc(s));
+        }
+      }
+    }
+    std::optional<grpc::Status> finish;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      finish = TakeFinishLocked();
+    }
+    if (finish) this->Finish(*finish);
+  }
+
+ protected:
+  struct Pending {
+    pb::ViewRequest view;
+    ExtractRequest request;
+    Clock::time_point received;
+  };
+
+  // Ends the stream now, before admission or on a rejected request.
+  void Reject(const absl::Status& why) {
+    std::optional<grpc::Status> finish;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      FailLocked(ToGrpc(why));
+      finish = TakeFinishLocked();
+    }
+    if (finish) this->Finish(*finish);
+  }
+
+  // Replaces the frame in progress by `p`: the old frame's cancel flag is set and its queued
+  // chunks dropped (a write already in flight completes). Returns true if the caller must
+  // start a job (none running).
+  bool StartViewLocked(Pending p) {
+    ++generation_;
+    cancel_->store(true);
+    cancel_ = std::make_shared<std::atomic<bool>>(false);
+    for (const auto& c : queue_)
+      if (c.last()) core_->counters.frames_cancelled.fetch_add(1);
+    queue_.clear();
+    pending_ = std::move(p);
+    if (job_running_) return false;
+    job_running_ = true;
+    return true;
+  }
+
+  void SubmitJob() {
+    std::shared_ptr<StreamBase> self = shared_from_this();
+    core_->frames->Submit([self] { self->RunJobs(); });
+  }
+
+  // Records an error finish: drops what is queued and stops the frame in progress.
+  void FailLocked(grpc::Status status) {
+    if (finishing_) return;
+    finishing_ = true;
+    finish_status_ = std::move(status);
+    cancel_->store(true);
+    queue_.clear();
+    pending_.reset();
+  }
+
+  // Finishes normally once there is nothing left to do and nothing more will come.
+  void CompleteIfIdleLocked() {
+    if (finishing_ || job_running_ || pending_ || !queue_.empty() || write_in_flight_) return;
+    if (draining_ && !reads_done_) {
+      finishing_ = true;
+      finish_status_ = grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down");
+    } else if (reads_done_) {
+      finishing_ = true;
+      finish_status_ = grpc::Status::OK;
+    }
+  }
+
+  std::optional<grpc::Status> TakeFinishLocked() {
+    if (!finishing_ || finish_called_ || write_in_flight_) return std::nullopt;
+    finish_called_ = true;
+    return finish_status_;
+  }
+
+  bool TakeNextWriteLocked() {
+    if (write_in_flight_ || queue_.empty() || finishing_) return false;
+    writing_ = std::move(queue_.front());
+    queue_.pop_front();
+    write_in_flight_ = true;
+    return true;
+  }
+
+  absl::Status RunView(const pb::ViewRequest& view, const ExtractRequest& request,
+                       uint64_t generation, std::atomic<bool>* cancel, Clock::time_point received) {
+    auto volume = core_->catalogue.Get(view.volume());
+    if (!volume.ok()) return volume.status();
+    if (cancel->load()) return absl::CancelledError("superseded");
+    return core_->producer.Run(**volume, view, request, generation, cancel, this, received);
+  }
+
+  ServiceCore* core_;
+  grpc::CallbackServerContext* context_;  // valid until OnDone; jobs may outlive it
+  const std::string peer_;
+  std::shared_ptr<StreamBase> self_;
+  bool admitted_ = false;  // holds a session slot (set before any other thread sees the stream)
+
+  mutable std::mutex mu_;
+  std::deque<pb::FrameChunk> queue_;
+  pb::FrameChunk writing_;  // the message in flight; gRPC reads it until OnWriteDone
+  bool write_in_flight_ = false;
+  uint64_t generation_ = 0;
+  std::shared_ptr<std::atomic<bool>> cancel_ = std::make_shared<std::atomic<bool>>(false);
+  std::optional<Pending> pending_;
+  bool job_running_ = false;
+  bool reads_done_ = false;  // no more requests will come
+  bool draining_ = false;
+  bool finishing_ = false;
+  bool finish_called_ = false;
+  grpc::Status finish_status_;
+};
+
+// Extract: one request, its frame(s), then OK.
+class ExtractStream final : public ChunkStream<grpc::ServerWriteReactor<pb::FrameChunk>> {
+ public:
+  ExtractStream(ServiceCore* core, grpc::CallbackServerContext* context)
+      : ChunkStream(core, context) {}
+
+  void Start(const pb::ViewRequest& view) {
+    if (!core_->Authorized(context_))
+      return Reject(absl::UnauthenticatedError("missing or wrong bearer token"));
+    auto request = ToExtractRequest(view, core_->config.limits, core_->config.threads);
+    if (!request.ok()) return Reject(request.status());
+    const absl::Status known = core_->catalogue.Check(view.volume());
+    if (!known.ok()) return Reject(known);
+    const absl::Status admitted = core_->Admit();
+    if (!admitted.ok()) return Reject(admitted);
+    bool submit;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      admitted_ = true;
+      reads_done_ = true;  // the one request is all there is
+      submit = StartViewLocked({view, std::move(*request), Clock::now()});
+    }
+    if (submit) SubmitJob();
+  }
+};
+
+// Session: views in, frames out, latest view wins.
+class SessionStream final
+    : public ChunkStream<grpc::ServerBidiReactor<pb::ViewRequest, pb::FrameChunk>> {
+ public:
+  SessionStream(ServiceCore* core, grpc::CallbackServerContext* context)
+      : ChunkStream(core, context) {}
+
+  void Start() {
+    if (!core_->Authorized(context_))
+      return Reject(absl::UnauthenticatedError("missing or wrong bearer token"));
+    const absl::Status admitted = core_->Admit();
+    if (!admitted.ok()) return Reject(admitted);
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      admitted_ = true;
+    }
+    StartRead(&incoming_);
+  }
+
+  void OnReadDone(bool ok) override {
+    const Clock::time_point received = Clock::now();
+    std::optional<grpc::Status> finish;
+    if (!ok) {
+      std::lock_guard<std::mutex> lock(mu_);
+      reads_done_ = true;
+      CompleteIfIdleLocked();
+      finish = TakeFinishLocked();
+    } else {
+      absl::StatusOr<ExtractRequest> request =
+          ToExtractRequest(incoming_, core_->config.limits, core_->config.threads);
+      if (request.ok()) {
+        const absl::Status known = core_->catalogue.Check(incoming_.volume());
+        if (!known.ok()) request = known;
+      }
+      bool submit = false, read_more = false;
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (!request.ok()) {
+          FailLocked(ToGrpc(request.status()));
+        } else if (!finishing_ && !draining_) {
+          submit = StartViewLocked({incoming_, std::move(*request), received});
+          read_more = true;
+        }
+        finish = TakeFinishLocked();
+      }
+      if (read_more) StartRead(&incoming_);
+      if (submit) SubmitJob();
+    }
+    if (finish) Finish(*finish);
+  }
+
+ private:
+  pb::ViewRequest incoming_;
+};
+
+IsostreamService::IsostreamService(const DaemonConfig& config)
+    : core_(std::make_shared<ServiceCore>(config)) {}
+
+IsostreamService::~IsostreamService() {
+  // Jobs first (they use the encoders), then the encoders.
+  core_->frames.reset();
+  core_->encoders.reset();
+}
+
+grpc::ServerUnaryReactor* IsostreamService::ListVolumes(grpc::CallbackServerContext* context,
+                                                        const pb::ListVolumesRequest*,
+                                                        pb::ListVolumesResponse* response) {
+  auto* reactor = context->DefaultReactor();
+  if (!core_->Authorized(context)) {
+    reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
+    return reactor;
+  }
+  for (const auto& name : core_->catalogue.Names()) response->add_names(name);
+  response->set_generators_allowed(core_->catalogue.generators_allowed());
+  response->set_max_generator_dim(core_->catalogue.max_generator_dim());
+  reactor->Finish(grpc::Status::OK);
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerContext* context,
+                                                          const pb::GetVolumeInfoRequest* request,
+                                                          pb::VolumeInfo* response) {
+  auto* reactor = context->DefaultReactor();
+  if (!core_->Authorized(context)) {
+    reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
+    return reactor;
+  }
+  const int bins = request->histogram_bins() == 0 ? 64 : request->histogram_bins();
+  absl::Status known = core_->catalogue.Check(request->name());
+  if (known.ok() && (bins < 1 || bins > 4096))
+    known = absl::InvalidArgumentError("histogram_bins must be in 1..4096");
+  if (!known.ok()) {
+    reactor->Finish(ToGrpc(known));
+    return reactor;
+  }
+  // Preparing may build a hierarchy (seconds): off gRPC's threads.
+  ServiceCore* core = core_.get();
+  const std::string name = request->name();
+  core_->frames->Submit([core, name, bins, reactor, response] {
+    auto served = core->catalogue.Get(name);
+    if (!served.ok()) {
+      reactor->Finish(ToGrpc(served.status()));
+      return;
+    }
+    const Volume& v = *(*served)->prepared.volume;
+    const Hierarchy& h = *(*served)->prepared.hierarchy;
+    response->set_name(name);
+    for (int a = 0; a < 3; ++a) response->add_dims(v.dims[a]);
+    response->mutable_spacing()->set_x(v.spacing[0]);
+    response->mutable_spacing()->set_y(v.spacing[1]);
+    response->mutable_spacing()->set_z(v.spacing[2]);
+    response->mutable_origin()->set_x(v.origin[0]);
+    response->mutable_origin()->set_y(v.origin[1]);
+    response->mutable_origin()->set_z(v.origin[2]);
+    response->set_min_value(v.min_value);
+    response->set_max_value(v.max_value);
+    response->set_position_error((*served)->position_error);
+    // The hierarchy holds the samples (the data sits at the cube's origin corner).
+    std::vector<uint64_t> counts(size_t(bins), 0);
+    const double lo = v.min_value, width = double(v.max_value) - v.min_value;
+    const auto& d = h.data_dims();
+    for (int z = 0; z < d[2]; ++z)
+      for (int y = 0; y < d[1]; ++y)
+        for (int x = 0; x < d[0]; ++x) {
+          const double t = width > 0 ? (h.sample(x, y, z) - lo) / width : 0.0;
+          ++counts[std::min(size_t(bins) - 1, size_t(std::max(0.0, t * bins)))];
+        }
+    for (uint64_t c : counts) response->add_histogram(c);
+    reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* IsostreamService::GetServerStats(grpc::CallbackServerContext* context,
+                                                           const pb::GetServerStatsRequest*,
+                                                           pb::ServerStats* response) {
+  auto* reactor = context->DefaultReactor();
+  if (!core_->Authorized(context)) {
+    reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
+    return reactor;
+  }
+  *response = Stats();
+  reactor->Finish(grpc::Status::OK);
+  return reactor;
+}
+
+grpc::ServerWriteReactor<pb::FrameChunk>* IsostreamService::Extract(
+    grpc::CallbackServerContext* context, const pb::ViewRequest* request) {
+  auto* s = ExtractStream::Create<ExtractStream>(core_.get(), context);
+  s->Start(*request);
+  return s;
+}
+
+grpc::ServerBidiReactor<pb::ViewRequest, pb::FrameChunk>* IsostreamService::Session(
+    grpc::CallbackServerContext* context) {
+  auto* s = SessionStream::Create<SessionStream>(core_.get(), context);
+  s->Start();
+  return s;
+}
+
+void IsostreamService::BeginShutdown() {
+  core_->shutting_down.store(true);
+  std::vector<std::shared_ptr<StreamBase>> open;
+  {
+    std::lock_guard<std::mutex> lock(core_->streams_mu);
+    for (auto& [ptr, weak] : core_->streams)
+      if (auto s = weak.lock()) open.push_back(std::move(s));
+  }
+  for (auto& s : open) s->Drain();
+}
+
+bool IsostreamService::WaitForStreams(std::chrono::milliseconds timeout) {
+  std::unique_lock<std::mutex> lock(core_->streams_mu);
+  return core_->streams_cv.wait_for(lock, timeout, [&] { return core_->streams.empty(); });
+}
+
+pb::ServerStats IsostreamService::Stats() const {
+  const ServerCounters& c = core_->counters;
+  pb::ServerStats s;
+  s.set_sessions_open(c.sessions_open.load());
+  s.set_sessions_total(c.sessions_total.load());
+  s.set_sessions_closed(c.sessions_closed.load());
+  s.set_sessions_rejected(c.sessions_rejected.load());
+  s.set_frames_started(c.frames_started.load());
+  s.set_frames_sent(c.frames_sent.load());
+  s.set_frames_cancelled(c.frames_cancelled.load());
+  s.set_chunks_sent(c.chunks_sent.load());
+  s.set_bytes_sent(c.bytes_sent.load());
+  s.set_volumes_prepared(core_->catalogue.prepared_count());
+  s.set_serving(!core_->shutting_down.load());
+  return s;
+}
+
+}  // namespace isostream::service

@@ -1,0 +1,48 @@
+// The isostream.v1.Isostream gRPC service (callback API): catalogue calls, Extract and Session
+// streams, auth, limits and server counters. One reactor per stream with one write in flight
+// (OnWriteDone starts the next), so a slow client slows only its own stream; extraction and
+// encoding run on worker pools, never on gRPC's threads.
+#pragma once
+
+#include <chrono>
+#include <memory>
+
+#include "proto/isostream.grpc.pb.h"
+#include "server/service/config.h"
+
+namespace isostream::service {
+
+struct ServiceCore;
+
+class IsostreamService final : public ::isostream::v1::Isostream::CallbackService {
+ public:
+  explicit IsostreamService(const DaemonConfig& config);
+  ~IsostreamService() override;  // waits for worker jobs; call after the server has shut down
+
+  grpc::ServerUnaryReactor* ListVolumes(grpc::CallbackServerContext* context,
+                                        const ::isostream::v1::ListVolumesRequest* request,
+                                        ::isostream::v1::ListVolumesResponse* response) override;
+  grpc::ServerUnaryReactor* GetVolumeInfo(grpc::CallbackServerContext* context,
+                                          const ::isostream::v1::GetVolumeInfoRequest* request,
+                                          ::isostream::v1::VolumeInfo* response) override;
+  grpc::ServerUnaryReactor* GetServerStats(grpc::CallbackServerContext* context,
+                                           const ::isostream::v1::GetServerStatsRequest* request,
+                                           ::isostream::v1::ServerStats* response) override;
+  grpc::ServerWriteReactor<::isostream::v1::FrameChunk>* Extract(
+      grpc::CallbackServerContext* context, const ::isostream::v1::ViewRequest* request) override;
+  grpc::ServerBidiReactor<::isostream::v1::ViewRequest, ::isostream::v1::FrameChunk>* Session(
+      grpc::CallbackServerContext* context) override;
+
+  // Graceful stop, step one: new streams get UNAVAILABLE; open streams finish once the frame in
+  // progress has been written (sessions then end with UNAVAILABLE, Extract with OK).
+  void BeginShutdown();
+  // Waits until no stream is open, at most `timeout`. True if none is open.
+  bool WaitForStreams(std::chrono::milliseconds timeout);
+
+  ::isostream::v1::ServerStats Stats() const;
+
+ private:
+  std::shared_ptr<ServiceCore> core_;
+};
+
+}  // namespace isostream::service
