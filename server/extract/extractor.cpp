@@ -63,7 +63,7 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
                     double eps) {
   Context c;
   c.bricks = h.bricks();
-  c.nb = h.bricks_per_axis();
+  for (int a = 0; a < 3; ++a) c.axis_offset[a] = h.axis_offsets()[a].data();
   c.k = h.k();
   c.n = h.n();
   for (int a = 0; a < 3; ++a) c.data_max[a] = h.data_dims()[a] - 1;
@@ -87,6 +87,8 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.normals = r.normals;
   c.xf = xf;
   c.tables = &ReferenceTets::Get();
+  for (int level = 0; level <= 3 * c.k; ++level)
+    c.inv_unit[level] = 2.0 / double((1 << c.k) >> (level / 3));
   return c;
 }
 
@@ -112,6 +114,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
     t.g = glm::inverse(glm::transpose(e)) * df;  // the only direct solve: the six roots
     t.cls = tables.initial_class(i);
     t.level = 0;
+    t.xref = c.Index(RefinementPoint(t.v));
     items.push_back(t);
   }
   constexpr size_t kTargetSubtrees = 256;

@@ -31,6 +31,7 @@ struct Node {
   TetVertices v;
   float f[4];
   glm::dvec3 g;  // gradient of the linear interpolant on T, grid units
+  size_t xref;   // store index of the refinement vertex (unused at the finest level)
   TetClass cls;
   int level;
 };
@@ -38,7 +39,7 @@ struct Node {
 // Everything the traversal reads, fixed for one request.
 struct Context {
   const HierarchyBrick* bricks = nullptr;
-  size_t nb = 0;  // bricks per axis
+  const uint32_t* axis_offset[3] = {nullptr, nullptr, nullptr};  // Hierarchy::axis_offsets()
   int k = 0, n = 0;
   glm::ivec3 data_max{0};             // data box is [0, data_max]
   bool clip = false;                  // the data box is smaller than the cube
@@ -52,13 +53,11 @@ struct Context {
   NormalMode normals = NormalMode::kSmooth;
   GridToWorld xf;
   const ReferenceTets* tables = nullptr;
+  // 1 / (real length of one normalised class unit) per level: half the level's cube cell.
+  double inv_unit[3 * 16 + 1];
 
-  // Hierarchy::index, inlined with the brick count at hand.
-  size_t Index(const glm::ivec3& p) const {
-    constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
-    const size_t brick = (size_t(p.z >> b) * nb + size_t(p.y >> b)) * nb + size_t(p.x >> b);
-    return (brick << (3 * b)) | (size_t(p.z & m) << (2 * b)) | (size_t(p.y & m) << b) |
-           size_t(p.x & m);
+  size_t Index(const glm::ivec3& p) const {  // Hierarchy::index
+    return size_t(axis_offset[0][p.x]) + axis_offset[1][p.y] + axis_offset[2][p.z];
   }
   float F(size_t i) const { return bricks[i >> 9].value[i & 511]; }
   float Eta(size_t i) const { return DecodeEta(bricks[i >> 9].eta[i & 511]); }
@@ -95,7 +94,7 @@ inline Decision Decide(const Context& c, const Node& t) {
     IsoRange(c, fmin, fmax, &first, &last);  // exact: a crossing needs fmin < iso <= fmax
     return first < last ? Decision::kLeaf : Decision::kCull;
   }
-  const float e = c.Eta(c.Index(RefinementPoint(t.v)));
+  const float e = c.Eta(t.xref);
   // Any iso in [fmin - e, fmax + e] may meet f_full inside T.
   int a = 0;
   while (a < c.iso_count && c.iso[a] < fmin - e) ++a;
@@ -109,11 +108,9 @@ inline Decision Decide(const Context& c, const Node& t) {
 inline void Bisect(const Context& c, const Node& t, Node out[2]) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
   const glm::ivec3 x = RefinementPoint(t.v);
-  const float fx = c.F(x);
+  const float fx = c.F(t.xref);
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
-  const double w = double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]));
-  // One normalised unit of the class is half the cube cell of this level.
-  const double unit = double((1 << c.k) >> (t.level / 3)) * 0.5;
+  const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
   bool child0_first = true;
   if (c.ordered) {
     const double side = c.orthographic ? -glm::dot(rt.plane_normal, c.dir)
@@ -124,22 +121,14 @@ inline void Bisect(const Context& c, const Node& t, Node out[2]) {
     Node& o = out[child0_first ? ch : 1 - ch];
     ChildVertices(rt, t.v, ch, &o.v);
     for (int i = 0; i < 4; ++i) o.f[i] = fp[rt.child_point[ch][i]];
-    o.g = t.g + w * rt.gradient_update[ch] / unit;
+    o.g = t.g + w * rt.gradient_update[ch];
     o.cls = rt.child[ch];
     o.level = t.level + 1;
-  }
-  // The next reads are the children's and grandchildren's refinement vertices: start
-  // fetching them now so a DFS step does not wait on memory.
-  if (t.level + 2 < 3 * c.k) {
-    for (int ch = 0; ch < 2; ++ch) {
-      const Node& o = out[ch];
-      const ReferenceTet& rc = (*c.tables)[o.cls];
-      const glm::ivec3 points[5] = {o.v[0], o.v[1], o.v[2], o.v[3], RefinementPoint(o.v)};
-      c.Prefetch(c.Index(points[kRefinementPoint]));
-      for (int g = 0; g < 2; ++g) {
-        const glm::ivec3 mid = (points[rc.child_point[g][0]] + points[rc.child_point[g][3]]) / 2;
-        c.Prefetch(c.Index(mid));
-      }
+    // The child's first read is its refinement vertex: start fetching it now (the second
+    // child has a whole subtree's time to arrive).
+    if (o.level < 3 * c.k) {
+      o.xref = c.Index(RefinementPoint(o.v));
+      c.Prefetch(o.xref);
     }
   }
 }
@@ -317,27 +306,31 @@ class Traverser {
   }
 
   // Key of (edge, surface): the lower-index endpoint, the edge's direction and scale.
-  uint64_t EdgeKey(const glm::ivec3& lo, const glm::ivec3& hi, int s) const {
+  // Edges of the hierarchy run along 13 directions with power-of-two lengths, so the
+  // direction and log2(length) pin the upper endpoint down from the lower one.
+  static uint64_t EdgeKey(size_t lo_index, const glm::ivec3& lo, const glm::ivec3& hi, int s) {
     const glm::ivec3 d = hi - lo;
     const int scale = std::max(std::max(std::abs(d.x), std::abs(d.y)), std::abs(d.z));
-    const glm::ivec3 u = d / scale;
-    const int dir = (u.x + 1) * 9 + (u.y + 1) * 3 + (u.z + 1);
-    const int code = dir * 11 + __builtin_ctz(static_cast<unsigned>(scale));
-    return (uint64_t(c_.Index(lo)) << 13) | (uint64_t(code) << 4) | uint64_t(s);
+    const int log2 = __builtin_ctz(static_cast<unsigned>(scale));
+    const int dir = ((d.x >> log2) + 1) * 9 + ((d.y >> log2) + 1) * 3 + ((d.z >> log2) + 1);
+    return (uint64_t(lo_index) << 13) | (uint64_t(dir * 11 + log2) << 4) | uint64_t(s);
   }
 
   uint32_t EdgeVertex(const Node& t, int ia, int ib, int s) {
     glm::ivec3 a = t.v[ia], b = t.v[ib];
     float fa = t.f[ia], fb = t.f[ib];
-    if (c_.Index(b) < c_.Index(a)) {  // canonical endpoint order: same bits from every tet
+    size_t index_a = c_.Index(a);
+    const size_t index_b = c_.Index(b);
+    if (index_b < index_a) {  // canonical endpoint order: same bits from every tet
       std::swap(a, b);
       std::swap(fa, fb);
+      index_a = index_b;
     }
     const uint32_t fresh = static_cast<uint32_t>(out_->mesh.vertex_count());
     const bool share = c_.normals == NormalMode::kSmooth;
     uint64_t key = 0;
     if (share) {
-      key = EdgeKey(a, b, s);
+      key = EdgeKey(index_a, a, b, s);
       const uint32_t found = table_->FindOrInsert(key, fresh);
       if (found != EdgeVertexTable::kMissing) return found;
     }

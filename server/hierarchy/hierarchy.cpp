@@ -223,6 +223,14 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
   h->nb_ = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
   h->data_dims_ = samples.data_dims;
   const size_t nb = h->nb_;
+  constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
+  for (int a = 0; a < 3; ++a) {
+    const size_t brick_stride = a == 0 ? 1 : a == 1 ? nb : nb * nb;
+    h->axis_offset_[a].resize(n);
+    for (size_t c = 0; c < n; ++c)
+      h->axis_offset_[a][c] =
+          uint32_t((((c >> b) * brick_stride) << (3 * b)) | ((c & m) << (a * b)));
+  }
   h->bricks_.resize(nb * nb * nb);
   // Points of partial bricks beyond the cube are never read; zero them all the same so the
   // store is deterministic. Bricks are first touched here, in parallel.
