@@ -281,6 +281,8 @@ class ChunkStream : public Reactor, public StreamBase {
     for (const auto& c : queue_)
       if (c.last()) core_->counters.frames_cancelled.fetch_add(1);
     queue_.clear();
+    // A view replaced before its frame started counts as a cancelled frame too.
+    if (pending_) core_->counters.frames_cancelled.fetch_add(1);
     pending_ = std::move(p);
     if (job_running_) return false;
     job_running_ = true;

@@ -1,1 +1,434 @@
+// Integration tests: a real isostreamd process on 127.0.0.1, driven through the client library
+// and the `isostream fetch` CLI. Volumes are small generators (buckyball:65/129) so the suite
+// runs in well under a minute on two cores; every wait is bounded.
 #include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <fstream>
+#include <thread>
+
+#include "client/net/session_client.h"
+#include "server/extract/extractor.h"
+#include "server/hierarchy/prepared_volume.h"
+#include "shared/frame_codec.h"
+#include "shared/ply_io.h"
+#include "tests/integration/daemon_process.h"
+
+namespace isostream {
+namespace {
+
+namespace pb = ::isostream::v1;
+using testing::DaemonProcess;
+using testing::ScratchDir;
+
+const std::vector<float> kIso = {0.05f, 0.15f, 0.25f};
+
+pb::ViewRequest MakeView(const std::string& volume, uint64_t id, double eps, glm::dvec3 eye,
+                         pb::Codec codec = pb::DRACO) {
+  pb::ViewRequest v;
+  v.set_volume(volume);
+  v.set_request_id(id);
+  for (float iso : kIso) v.add_surfaces()->set_isovalue(iso);
+  v.set_eps(eps);
+  v.mutable_camera()->mutable_eye()->set_x(eye.x);
+  v.mutable_camera()->mutable_eye()->set_y(eye.y);
+  v.mutable_camera()->mutable_eye()->set_z(eye.z);
+  v.set_codec(codec);
+  return v;
+}
+
+ExtractRequest DirectRequest(double eps, glm::dvec3 eye) {
+  ExtractRequest r;
+  r.isovalues = kIso;
+  r.eps = eps;
+  r.view.eye = eye;
+  return r;
+}
+
+// Per-triangle comparison: the codec renumbers (and may duplicate) vertices, so triangles are
+// compared corner by corner, in order, with their surface index.
+void ExpectSameFrame(const OrderedMesh& direct, const OrderedMesh& got, float position_error) {
+  ASSERT_EQ(direct.triangle_count(), got.triangle_count());
+  size_t surface_mismatch = 0, position_mismatch = 0;
+  float worst = 0;
+  for (size_t t = 0; t < direct.triangle_count(); ++t) {
+    surface_mismatch += direct.surface[t] != got.surface[t];
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t a = direct.triangles[3 * t + c], b = got.triangles[3 * t + c];
+      for (int k = 0; k < 3; ++k) {
+        const float d = std::abs(direct.positions[3 * a + k] - got.positions[3 * b + k]);
+        worst = std::max(worst, d);
+        position_mismatch += d > position_error;
+      }
+    }
+  }
+  EXPECT_EQ(surface_mismatch, 0u);
+  EXPECT_EQ(position_mismatch, 0u) << "worst " << worst << " allowed " << position_error;
+}
+
+class Daemon : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start(
+        {"--cache-dir", scratch_->path() + "/cache", "--threads", "2", "--max-sessions", "3",
+         "--max-isovalues", "4", "--max-triangles", "1000000", "--max-dim", "129"},
+        scratch_->path() + "/isostreamd.log"));
+  }
+  static void TearDownTestSuite() {
+    delete daemon_;
+    delete scratch_;
+  }
+
+  std::unique_ptr<net::Client> Connect(const std::string& token = "") {
+    net::ClientOptions o;
+    o.address = daemon_->address();
+    o.token = token;
+    auto c = net::Client::Connect(o);
+    EXPECT_TRUE(c.ok());
+    return std::move(*c);
+  }
+
+  // The server's own preparation of the volume, repeated here (same cache) for comparison.
+  static PreparedVolume Local(const std::string& spec) {
+    HierarchyCacheOptions cache;
+    cache.dir = scratch_->path() + "/cache";
+    auto p = PrepareVolume(spec, VolumeLimits{}, cache, HierarchyBuildOptions{});
+    EXPECT_TRUE(p.ok()) << p.status();
+    return std::move(*p);
+  }
+
+  // Polls the server's counters until `done` holds (at most 10 s).
+  static bool WaitForStats(net::Client* c, const std::function<bool(const pb::ServerStats&)>& done,
+                           pb::ServerStats* last = nullptr) {
+    for (int i = 0; i < 500; ++i) {
+      auto s = c->GetServerStats();
+      if (s.ok() && done(*s)) {
+        if (last) *last = *s;
+        return true;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return false;
+  }
+
+  static ScratchDir* scratch_;
+  static DaemonProcess* daemon_;
+};
+ScratchDir* Daemon::scratch_ = nullptr;
+DaemonProcess* Daemon::daemon_ = nullptr;
+
+TEST_F(Daemon, HealthServingAndCatalogue) {
+  auto c = Connect();
+  auto health = c->CheckHealth();
+  ASSERT_TRUE(health.ok()) << health.status();
+  EXPECT_TRUE(*health);
+  auto list = c->ListVolumes();
+  ASSERT_TRUE(list.ok()) << list.status();
+  EXPECT_TRUE(list->generators_allowed());
+  EXPECT_EQ(list->max_generator_dim(), 129);
+  auto info = c->GetVolumeInfo("buckyball:65", 16);
+  ASSERT_TRUE(info.ok()) << info.status();
+  ASSERT_EQ(info->dims_size(), 3);
+  EXPECT_EQ(info->dims(0), 65);
+  ASSERT_EQ(info->histogram_size(), 16);
+  uint64_t total = 0;
+  for (uint64_t h : info->histogram()) total += h;
+  EXPECT_EQ(total, 65u * 65u * 65u);
+  EXPECT_LT(info->min_value(), info->max_value());
+  // Documented quantization: at most 1/64 of a voxel.
+  EXPECT_GT(info->position_error(), 0);
+  EXPECT_LE(info->position_error(), info->spacing().x() / 64 * 1.01);
+}
+
+TEST_F(Daemon, DecodedFrameEqualsDirectExtraction) {
+  const glm::dvec3 eye(2.5, 1.8, 3.1);
+  PreparedVolume local = Local("buckyball:65");
+  auto direct = Extract(*local.hierarchy, local.grid_to_world, DirectRequest(0.002, eye));
+  ASSERT_TRUE(direct.ok()) << direct.status();
+  auto c = Connect();
+  auto info = c->GetVolumeInfo("buckyball:65");
+  ASSERT_TRUE(info.ok());
+
+  for (pb::Codec codec : {pb::DRACO, pb::RAW}) {
+    SCOPED_TRACE(pb::Codec_Name(codec));
+    std::vector<pb::FrameChunk> chunks;
+    auto frame =
+        c->Fetch(MakeView("buckyball:65", 7, 0.002, eye, codec), [&](const pb::FrameChunk& ch) {
+          pb::FrameChunk header = ch;
+          header.clear_data();
+          chunks.push_back(header);
+        });
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    EXPECT_EQ(frame->id, 7u);
+    EXPECT_EQ(frame->stats.triangles(), int64_t(direct->mesh.triangle_count()));
+    ExpectSameFrame(direct->mesh, frame->mesh,
+                    codec == pb::RAW ? 0.0f : float(info->position_error()));
+    // Chunks in draw order, the first small so it leaves early, none over 64k triangles.
+    ASSERT_GT(chunks.size(), 2u);
+    for (size_t i = 0; i < chunks.size(); ++i) {
+      EXPECT_EQ(chunks[i].chunk_index(), i);
+      EXPECT_LE(chunks[i].triangle_count(), 65536u);
+      EXPECT_EQ(chunks[i].last(), i + 1 == chunks.size());
+    }
+    EXPECT_EQ(chunks[0].triangle_count(), 8192u);
+    EXPECT_EQ(chunks.back().chunk_count(), chunks.size());
+    EXPECT_EQ(frame->stats.chunk_count(), int(chunks.size()));
+  }
+}
+
+TEST_F(Daemon, FetchCommandWritesTheFrame) {
+  const std::string out = scratch_->path() + "/fetched.ply";
+  const std::string cmd = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
+                          daemon_->address() +
+                          " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.002 --eye "
+                          "2.5,1.8,3.1 --codec raw -o " +
+                          out + " 2>/dev/null";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  auto mesh = ReadPly(out);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  PreparedVolume local = Local("buckyball:65");
+  auto direct = Extract(*local.hierarchy, local.grid_to_world,
+                        DirectRequest(0.002, glm::dvec3(2.5, 1.8, 3.1)));
+  ASSERT_TRUE(direct.ok());
+  ExpectSameFrame(direct->mesh, *mesh, 0.0f);
+
+  const std::string bad = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
+                          daemon_->address() + " --volume /etc/passwd --iso 0.1 --eps 0.01 -o " +
+                          out + " 2>/dev/null";
+  EXPECT_NE(std::system(bad.c_str()), 0);
+}
+
+TEST_F(Daemon, StatusCodes) {
+  auto c = Connect();
+  const glm::dvec3 eye(2, 2, 2);
+  auto code = [&](const pb::ViewRequest& v) { return c->Fetch(v).status(); };
+
+  // Unknown names, paths and oversized generators are all just "not in the catalogue".
+  for (const char* name : {"nope", "/etc/passwd", "../x.vdb", "buckyball:4097", "raw:/x:2x2x2:f32"})
+    EXPECT_EQ(code(MakeView(name, 1, 0.01, eye)).code(), absl::StatusCode::kNotFound) << name;
+  EXPECT_EQ(c->GetVolumeInfo("nope").status().code(), absl::StatusCode::kNotFound);
+
+  pb::ViewRequest no_surfaces = MakeView("buckyball:65", 1, 0.01, eye);
+  no_surfaces.clear_surfaces();
+  absl::Status s = code(no_surfaces);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_FALSE(s.message().empty());
+
+  s = code(MakeView("buckyball:65", 1, -1.0, eye));
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("eps"), std::string::npos) << s;
+
+  pb::ViewRequest ortho = MakeView("buckyball:65", 1, 0.01, eye);
+  ortho.mutable_camera()->set_projection(pb::ORTHOGRAPHIC);
+  ortho.mutable_camera()->mutable_target()->set_x(2);
+  ortho.mutable_camera()->mutable_target()->set_y(2);
+  ortho.mutable_camera()->mutable_target()->set_z(2);
+  s = code(ortho);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("direction"), std::string::npos) << s;
+
+  pb::ViewRequest no_accuracy = MakeView("buckyball:65", 1, 0.01, eye);
+  no_accuracy.clear_eps();
+  EXPECT_EQ(code(no_accuracy).code(), absl::StatusCode::kInvalidArgument);
+
+  pb::ViewRequest nan_eye = MakeView("buckyball:65", 1, 0.01, glm::dvec3(NAN, 0, 0));
+  EXPECT_EQ(code(nan_eye).code(), absl::StatusCode::kInvalidArgument);
+
+  pb::ViewRequest many = MakeView("buckyball:65", 1, 0.01, eye);
+  for (int i = 0; i < 2; ++i) many.add_surfaces()->set_isovalue(0.3f + 0.01f * i);
+  EXPECT_EQ(code(many).code(), absl::StatusCode::kResourceExhausted);  // 5 > --max-isovalues 4
+
+  pb::ViewRequest big_budget = MakeView("buckyball:65", 1, 0.01, eye);
+  big_budget.set_triangle_budget(2'000'000);
+  EXPECT_EQ(code(big_budget).code(), absl::StatusCode::kResourceExhausted);
+
+  // A bad request on a session ends that session with the status.
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  ASSERT_TRUE((*session)->Send(no_surfaces).ok());
+  EXPECT_EQ((*session)->Finish().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST_F(Daemon, NewViewCancelsOldFrameAndCoarseArrivesBeforeRefined) {
+  auto c = Connect();
+  auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  net::Session& s = **session;
+  // A heavy first view (about 690k triangles at eps 0), replaced once its first chunk is in.
+  ASSERT_TRUE(s.Send(MakeView("buckyball:129", 1, 0.0, glm::dvec3(3, 2, 4))).ok());
+  pb::FrameChunk chunk;
+  ASSERT_TRUE(s.Read(&chunk));
+  ASSERT_EQ(chunk.frame_id(), 1u);
+  ASSERT_FALSE(chunk.last());
+  pb::ViewRequest second = MakeView("buckyball:129", 2, 0.002, glm::dvec3(-3, 1, 2));
+  second.set_progressive(true);
+  ASSERT_TRUE(s.Send(second).ok());
+
+  std::vector<std::pair<uint64_t, bool>> order;  // (frame id, coarse) of each chunk
+  net::FrameAssembler assembler;
+  bool coarse_done = false, refined_done = false;
+  int64_t coarse_triangles = 0, refined_triangles = 0;
+  order.push_back({chunk.frame_id(), chunk.coarse()});
+  ASSERT_TRUE(assembler.Add(chunk).ok());
+  while (!refined_done && s.Read(&chunk)) {
+    order.push_back({chunk.frame_id(), chunk.coarse()});
+    ASSERT_TRUE(assembler.Add(chunk).ok());
+    if (chunk.frame_id() != 2 || !assembler.complete()) continue;
+    net::Frame f = assembler.Take();
+    if (f.coarse) {
+      EXPECT_FALSE(refined_done);
+      coarse_done = true;
+      coarse_triangles = int64_t(f.mesh.triangle_count());
+    } else {
+      refined_done = true;
+      refined_triangles = int64_t(f.mesh.triangle_count());
+    }
+  }
+  EXPECT_TRUE(coarse_done);
+  EXPECT_TRUE(refined_done);
+  EXPECT_GT(coarse_triangles, 0);
+  EXPECT_LE(coarse_triangles, 20000);
+  EXPECT_GT(refined_triangles, coarse_triangles);
+  // Once frame 2 has started, nothing of frame 1 follows; coarse chunks all precede refined.
+  size_t first2 = order.size();
+  for (size_t i = 0; i < order.size(); ++i)
+    if (order[i].first == 2) {
+      first2 = std::min(first2, i);
+    }
+  ASSERT_LT(first2, order.size());
+  bool seen_refined = false;
+  for (size_t i = first2; i < order.size(); ++i) {
+    EXPECT_EQ(order[i].first, 2u) << "chunk " << i;
+    if (!order[i].second) seen_refined = true;
+    if (seen_refined) {
+      EXPECT_FALSE(order[i].second) << "coarse chunk after refined";
+    }
+  }
+  ASSERT_TRUE(s.CloseSend().ok());
+  EXPECT_TRUE(s.Finish().ok());
+  pb::ServerStats after;
+  ASSERT_TRUE(WaitForStats(
+      c.get(), [](const pb::ServerStats& st) { return st.sessions_open() == 0; }, &after));
+  EXPECT_GE(after.frames_cancelled(), before->frames_cancelled() + 1);
+}
+
+TEST_F(Daemon, SessionLimitIsResourceExhausted) {
+  auto c = Connect();
+  std::vector<std::unique_ptr<net::Session>> open;
+  for (int i = 0; i < 3; ++i) {
+    auto s = c->OpenSession();
+    ASSERT_TRUE(s.ok());
+    // A complete small frame proves the server admitted the session.
+    ASSERT_TRUE((*s)->Send(MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2))).ok());
+    net::FrameAssembler a;
+    pb::FrameChunk chunk;
+    while (!a.complete() && (*s)->Read(&chunk)) ASSERT_TRUE(a.Add(chunk).ok());
+    ASSERT_TRUE(a.complete());
+    open.push_back(std::move(*s));
+  }
+  auto extra = c->OpenSession();
+  ASSERT_TRUE(extra.ok());
+  (*extra)->Send(MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2))).IgnoreError();
+  EXPECT_EQ((*extra)->Finish().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(c->Fetch(MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2))).status().code(),
+            absl::StatusCode::kResourceExhausted);
+  for (auto& s : open) {
+    ASSERT_TRUE(s->CloseSend().ok());
+    EXPECT_TRUE(s->Finish().ok());
+  }
+  EXPECT_TRUE(
+      WaitForStats(c.get(), [](const pb::ServerStats& st) { return st.sessions_open() == 0; }));
+}
+
+TEST_F(Daemon, ClientLeavingMidFrameFreesItsSession) {
+  auto c = Connect();
+  for (int round = 0; round < 2; ++round) {
+    auto session = c->OpenSession();
+    ASSERT_TRUE(session.ok());
+    ASSERT_TRUE((*session)->Send(MakeView("buckyball:129", 1, 0.0, glm::dvec3(3, 2, 4))).ok());
+    pb::FrameChunk chunk;
+    ASSERT_TRUE((*session)->Read(&chunk));  // the frame is under way
+    EXPECT_FALSE(chunk.last());
+    if (round == 0)
+      (*session)->Cancel();
+    else
+      session->reset();  // destroyed without closing
+    EXPECT_TRUE(
+        WaitForStats(c.get(), [](const pb::ServerStats& st) { return st.sessions_open() == 0; }))
+        << "round " << round;
+  }
+}
+
+TEST_F(Daemon, StillServesAfterEverything) {
+  auto c = Connect();
+  auto frame = c->Fetch(MakeView("buckyball:65", 99, 0.01, glm::dvec3(-2, 3, 1)));
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  EXPECT_GT(frame->mesh.triangle_count(), 0u);
+  auto stats = c->GetServerStats();
+  ASSERT_TRUE(stats.ok());
+  EXPECT_TRUE(stats->serving());
+  EXPECT_GT(stats->frames_sent(), 0);
+  EXPECT_GT(stats->bytes_sent(), 0);
+  EXPECT_TRUE(WaitForStats(c.get(), [](const pb::ServerStats& st) {
+    return st.sessions_open() == 0 && st.sessions_closed() == st.sessions_total();
+  }));
+}
+
+// A daemon with a token and tight limits; it is stopped with SIGTERM at the end.
+class GuardedDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start({"--cache-dir", scratch_->path() + "/cache", "--threads", "2",
+                                "--token", "s3cret", "--max-triangles", "100000"},
+                               scratch_->path() + "/isostreamd.log"));
+  }
+};
+
+TEST_F(GuardedDaemon, TokenIsRequired) {
+  const auto view = MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2));
+  EXPECT_EQ(Connect()->Fetch(view).status().code(), absl::StatusCode::kUnauthenticated);
+  EXPECT_EQ(Connect("wrong")->Fetch(view).status().code(), absl::StatusCode::kUnauthenticated);
+  EXPECT_EQ(Connect("wrong")->GetServerStats().status().code(), absl::StatusCode::kUnauthenticated);
+  auto session = Connect("s3cre")->OpenSession();
+  ASSERT_TRUE(session.ok());
+  EXPECT_EQ((*session)->Finish().code(), absl::StatusCode::kUnauthenticated);
+  // Health needs no token.
+  auto health = Connect()->CheckHealth();
+  ASSERT_TRUE(health.ok());
+  EXPECT_TRUE(*health);
+  EXPECT_TRUE(Connect("s3cret")->Fetch(view).ok());
+}
+
+TEST_F(GuardedDaemon, FrameOverTriangleLimitIsResourceExhausted) {
+  // About 138k triangles at this eps, over --max-triangles 100000.
+  auto s = Connect("s3cret")->Fetch(MakeView("buckyball:65", 1, 0.002, glm::dvec3(2, 2, 2)));
+  EXPECT_EQ(s.status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_NE(s.status().message().find("100000"), std::string::npos) << s.status();
+}
+
+TEST_F(GuardedDaemon, SigtermFinishesTheFrameInFlightAndExitsZero) {
+  auto c = Connect("s3cret");
+  std::atomic<bool> first_chunk{false};
+  absl::Status fetched;
+  std::thread fetch([&] {
+    pb::ViewRequest view = MakeView("buckyball:129", 5, 0.0, glm::dvec3(2, 2, 2));
+    view.set_triangle_budget(95000);
+    auto f = c->Fetch(view, [&](const pb::FrameChunk&) { first_chunk = true; });
+    fetched = f.status();
+  });
+  for (int i = 0; i < 1000 && !first_chunk; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_EQ(daemon_->Stop(SIGTERM), 0);
+  fetch.join();
+  EXPECT_TRUE(fetched.ok()) << fetched;
+}
+
+}  // namespace
+}  // namespace isostream
