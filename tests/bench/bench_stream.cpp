@@ -1,0 +1,213 @@
+// Streaming benchmark: frame codec sizes and speeds on a real ~1M-triangle view-ordered frame,
+// and view change -> first chunk / complete frame at a client over loopback gRPC (an
+// in-process isostreamd service on 127.0.0.1, the client library on the other end).
+//
+//   bench_stream [SPEC] [TRIANGLES] [VIEWS]      default: cayley:257 1000000 7
+#include <grpcpp/grpcpp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "client/net/session_client.h"
+#include "server/extract/extractor.h"
+#include "server/hierarchy/prepared_volume.h"
+#include "server/service/catalogue.h"
+#include "server/service/service.h"
+#include "shared/frame_codec.h"
+
+namespace {
+
+using namespace isostream;
+namespace pb = ::isostream::v1;
+using Clock = std::chrono::steady_clock;
+
+double Ms(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+const std::vector<float> kIso = {-0.5f, 0.0f, 0.5f};
+
+glm::dvec3 Eye(int i) {
+  const double a = 0.6 + 0.45 * i;
+  return {3.5 * std::cos(a), 1.8 + 0.2 * (i % 3), 3.5 * std::sin(a)};
+}
+
+void CodecFigures(const OrderedMesh& mesh, const Volume& volume) {
+  QuantizationBox box;
+  int bits;
+  service::QuantizationFor(volume, &box, &bits);
+  std::printf(
+      "\ncodec on the frame: %zu triangles, %zu vertices, normals and surface index, "
+      "64k-triangle chunks, positions %d bits on the volume box (error %.2g, 1/64 "
+      "voxel), normals 10 bits\n",
+      mesh.triangle_count(), mesh.vertex_count(), bits, PositionErrorBound(box, bits));
+  std::printf("  %-34s %10s %12s %12s\n", "codec", "bytes/tri", "encode ms/1M", "decode ms/1M");
+  struct Variant {
+    const char* name;
+    bool raw;
+    bool compress;
+  };
+  for (const Variant& v :
+       {Variant{"draco sequential + connectivity", false, true},
+        Variant{"draco sequential", false, false}, Variant{"raw", true, false}}) {
+    CodecOptions o;
+    o.position_bits = bits;
+    o.normal_bits = 10;
+    o.compress_connectivity = v.compress;
+    o.position_box = box;
+    size_t bytes = 0;
+    double encode_ms = 0, decode_ms = 0;
+    std::string out;
+    OrderedMesh decoded;
+    for (size_t first = 0; first < mesh.triangle_count(); first += 65536) {
+      const size_t n = std::min<size_t>(65536, mesh.triangle_count() - first);
+      const auto t0 = Clock::now();
+      const absl::Status s =
+          v.raw ? EncodeChunkRaw(mesh, first, n, &out) : EncodeChunk(mesh, first, n, o, &out);
+      const auto t1 = Clock::now();
+      if (!s.ok()) {
+        std::printf("encode failed: %s\n", std::string(s.message()).c_str());
+        return;
+      }
+      if (!DecodeAnyChunk(out.data(), out.size(), &decoded).ok()) std::printf("decode failed\n");
+      encode_ms += Ms(t0, t1);
+      decode_ms += Ms(t1, Clock::now());
+      bytes += out.size();
+    }
+    const double per_m = 1e6 / double(mesh.triangle_count());
+    std::printf("  %-34s %10.2f %12.1f %12.1f\n", v.name, double(bytes) / mesh.triangle_count(),
+                encode_ms * per_m, decode_ms * per_m);
+  }
+}
+
+struct ViewTiming {
+  double first_chunk_ms, complete_ms, server_extract_ms;
+  int64_t triangles, bytes;
+};
+
+// Sends `view` on the session and reads its frame; decodes when `decode`.
+bool RunView(net::Session* s, const pb::ViewRequest& view, bool decode, ViewTiming* t) {
+  const auto t0 = Clock::now();
+  if (!s->Send(view).ok()) return false;
+  net::FrameAssembler assembler;
+  pb::FrameChunk chunk;
+  bool first = true;
+  t->bytes = 0;
+  while (s->Read(&chunk)) {
+    if (chunk.frame_id() != view.request_id()) continue;
+    if (first) {
+      t->first_chunk_ms = Ms(t0, Clock::now());
+      first = false;
+    }
+    t->bytes += int64_t(chunk.data().size());
+    if (decode && !assembler.Add(chunk).ok()) return false;
+    if (chunk.last()) {
+      t->complete_ms = Ms(t0, Clock::now());
+      t->triangles = chunk.stats().triangles();
+      t->server_extract_ms = chunk.stats().extract_ms();
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string spec = argc > 1 ? argv[1] : "cayley:257";
+  const int64_t target = argc > 2 ? std::atoll(argv[2]) : 1'000'000;
+  const int views = argc > 3 ? std::atoi(argv[3]) : 7;
+
+  HierarchyCacheOptions cache;
+  cache.dir = DefaultCacheDir();
+  auto prepared = PrepareVolume(spec, VolumeLimits{}, cache, HierarchyBuildOptions{});
+  if (!prepared.ok()) {
+    std::fprintf(stderr, "bench_stream: %s\n", std::string(prepared.status().message()).c_str());
+    return 1;
+  }
+  ExtractRequest r;
+  r.isovalues = kIso;
+  r.budget = target;
+  r.view.eye = Eye(0);
+  auto frame = Extract(*prepared->hierarchy, prepared->grid_to_world, r);
+  if (!frame.ok()) return 1;
+  const double eps = frame->stats.eps_used;
+  std::printf(
+      "volume %s, isovalues -0.5 0 0.5, budget %lld -> eps %.4g, %lld triangles "
+      "(direct extraction %.0f ms)\n",
+      spec.c_str(), (long long)target, eps, (long long)frame->stats.triangles,
+      frame->stats.total_ms);
+  CodecFigures(frame->mesh, *prepared->volume);
+
+  // The daemon's service in this process, on a free loopback port.
+  service::DaemonConfig config;
+  config.listen = "127.0.0.1:0";
+  config.cache_dir = cache.dir;
+  config.limits.max_dim = 1025;
+  config.limits.max_triangles = 8'000'000;
+  service::IsostreamService svc(config);
+  grpc::ServerBuilder builder;
+  int port = 0;
+  builder.AddListeningPort(config.listen, grpc::InsecureServerCredentials(), &port);
+  builder.RegisterService(&svc);
+  auto server = builder.BuildAndStart();
+  if (!server || port == 0) return 1;
+  net::ClientOptions options;
+  options.address = "127.0.0.1:" + std::to_string(port);
+  auto client = net::Client::Connect(options);
+  if (!client.ok()) return 1;
+
+  std::printf(
+      "\nview change -> frame at the client over loopback gRPC (eps %.4g, %d views, "
+      "median [min]; extract ms: the server's extraction alone)\n",
+      eps, views);
+  std::printf("  %-7s %-8s %10s %16s %16s %12s %10s\n", "codec", "decoded", "triangles",
+              "first chunk ms", "complete ms", "extract ms", "bytes/tri");
+  for (pb::Codec codec : {pb::DRACO, pb::RAW}) {
+    for (bool decode : {false, true}) {
+      auto session = (*client)->OpenSession();
+      if (!session.ok()) return 1;
+      std::vector<double> first, complete, extract;
+      ViewTiming t{};
+      for (int i = -1; i < views; ++i) {  // view -1 warms the volume and the connection
+        pb::ViewRequest v;
+        v.set_volume(spec);
+        v.set_request_id(uint64_t(i + 2));
+        for (float iso : kIso) v.add_surfaces()->set_isovalue(iso);
+        v.set_eps(eps);
+        const glm::dvec3 e = Eye(i + 1);
+        v.mutable_camera()->mutable_eye()->set_x(e.x);
+        v.mutable_camera()->mutable_eye()->set_y(e.y);
+        v.mutable_camera()->mutable_eye()->set_z(e.z);
+        v.set_codec(codec);
+        if (!RunView(session->get(), v, decode, &t)) {
+          std::fprintf(stderr, "bench_stream: view failed\n");
+          return 1;
+        }
+        if (i < 0) continue;
+        first.push_back(t.first_chunk_ms);
+        complete.push_back(t.complete_ms);
+        extract.push_back(t.server_extract_ms);
+      }
+      std::printf("  %-7s %-8s %10lld %8.1f [%5.1f] %8.1f [%5.1f] %12.1f %10.2f\n",
+                  codec == pb::RAW ? "raw" : "draco", decode ? "yes" : "no", (long long)t.triangles,
+                  Median(first), *std::min_element(first.begin(), first.end()), Median(complete),
+                  *std::min_element(complete.begin(), complete.end()), Median(extract),
+                  double(t.bytes) / double(std::max<int64_t>(1, t.triangles)));
+      (*session)->CloseSend().IgnoreError();
+      (*session)->Finish().IgnoreError();
+    }
+  }
+  server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
+  return 0;
+}
