@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cmath>
 #include <fstream>
+#include <sstream>
 #include <thread>
 
 #include "client/net/session_client.h"
@@ -428,6 +429,123 @@ TEST_F(GuardedDaemon, SigtermFinishesTheFrameInFlightAndExitsZero) {
   EXPECT_EQ(daemon_->Stop(SIGTERM), 0);
   fetch.join();
   EXPECT_TRUE(fetched.ok()) << fetched;
+}
+
+// A daemon with a JSON config: a catalogue (so generator specs are refused) and small chunks.
+class ConfiguredDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    const std::string config = scratch_->path() + "/isostreamd.json";
+    std::ofstream(config) << R"({"threads": 2, "volumes": {"ball": "buckyball:65"},
+        "frames": {"chunk_triangles": 4096, "first_chunk_triangles": 1024,
+                   "max_queued_chunks": 4}})";
+    ASSERT_TRUE(daemon_->Start({"--config", config, "--cache-dir", scratch_->path() + "/cache"},
+                               scratch_->path() + "/isostreamd.log"));
+  }
+};
+
+TEST_F(ConfiguredDaemon, ServesItsCatalogueOnly) {
+  auto c = Connect();
+  auto list = c->ListVolumes();
+  ASSERT_TRUE(list.ok());
+  ASSERT_EQ(list->names_size(), 1);
+  EXPECT_EQ(list->names(0), "ball");
+  EXPECT_FALSE(list->generators_allowed());
+  EXPECT_EQ(c->Fetch(MakeView("buckyball:65", 1, 0.01, glm::dvec3(2, 2, 2))).status().code(),
+            absl::StatusCode::kNotFound);
+  std::vector<uint32_t> sizes;
+  auto frame = c->Fetch(MakeView("ball", 3, 0.01, glm::dvec3(2, 2, 2)),
+                        [&](const pb::FrameChunk& ch) { sizes.push_back(ch.triangle_count()); });
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  ASSERT_GT(sizes.size(), 3u);
+  EXPECT_EQ(sizes[0], 1024u);
+  EXPECT_EQ(sizes[1], 2048u);
+  for (size_t i = 2; i + 1 < sizes.size(); ++i) EXPECT_EQ(sizes[i], 4096u);
+}
+
+TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
+  auto c = Connect();
+  std::atomic<bool> started{false};
+  absl::StatusOr<net::Frame> slow = absl::UnknownError("not run");
+  std::thread reader([&] {
+    slow = c->Fetch(MakeView("ball", 5, 0.002, glm::dvec3(2, 2, 2), pb::RAW),
+                    [&](const pb::FrameChunk&) {
+                      started = true;
+                      std::this_thread::sleep_for(std::chrono::milliseconds(15));
+                    });
+  });
+  for (int i = 0; i < 1000 && !started; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_TRUE(started);
+  ASSERT_EQ(kill(daemon_->pid(), SIGTERM), 0);
+  // While the frame drains: health NOT_SERVING and new streams refused.
+  bool not_serving = false;
+  for (int i = 0; i < 100 && !not_serving; ++i) {
+    auto h = Connect()->CheckHealth();
+    not_serving = h.ok() && !*h;
+    if (!not_serving) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  EXPECT_TRUE(not_serving);
+  EXPECT_EQ(Connect()->Fetch(MakeView("ball", 6, 0.05, glm::dvec3(2, 2, 2))).status().code(),
+            absl::StatusCode::kUnavailable);
+  reader.join();
+  ASSERT_TRUE(slow.ok()) << slow.status();
+  EXPECT_EQ(slow->stats.triangles(), int64_t(slow->mesh.triangle_count()));
+  EXPECT_EQ(daemon_->Stop(SIGTERM), 0);
+}
+
+// --deadline-ms 1: every frame that takes longer than a millisecond from request to last
+// chunk (all of them) ends with DEADLINE_EXCEEDED, and the daemon carries on.
+class ImpatientDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start({"--deadline-ms", "1", "--cache-dir", scratch_->path() + "/cache"},
+                               scratch_->path() + "/isostreamd.log"));
+  }
+};
+
+TEST_F(ImpatientDaemon, SlowFrameIsDeadlineExceeded) {
+  auto c = Connect();
+  for (int i = 0; i < 2; ++i)
+    EXPECT_EQ(c->Fetch(MakeView("buckyball:65", 1, 0.002, glm::dvec3(2, 2, 2))).status().code(),
+              absl::StatusCode::kDeadlineExceeded);
+  auto health = c->CheckHealth();
+  EXPECT_TRUE(health.ok() && *health);
+}
+
+class TlsDaemon : public Daemon {};
+
+TEST_F(TlsDaemon, ServesOverTls) {
+  ScratchDir dir;
+  const std::string key = dir.path() + "/key.pem", cert = dir.path() + "/cert.pem";
+  const std::string make =
+      "openssl req -x509 -newkey rsa:2048 -nodes -keyout " + key + " -out " + cert +
+      " -days 1 -subj /CN=localhost -addext subjectAltName=IP:127.0.0.1,DNS:localhost "
+      ">/dev/null 2>&1";
+  if (std::system(make.c_str()) != 0) GTEST_SKIP() << "openssl cannot make a test certificate";
+  DaemonProcess tls;
+  ASSERT_TRUE(tls.Start({"--tls-cert", cert, "--tls-key", key, "--no-cache"},
+                        dir.path() + "/isostreamd.log"));
+  std::ifstream in(cert);
+  std::stringstream pem;
+  pem << in.rdbuf();
+  net::ClientOptions o;
+  o.address = tls.address();
+  o.tls_ca_pem = pem.str();
+  auto secure = net::Client::Connect(o);
+  ASSERT_TRUE(secure.ok());
+  auto frame = (*secure)->Fetch(MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2)));
+  EXPECT_TRUE(frame.ok()) << frame.status();
+  o.tls_ca_pem.clear();
+  o.call_timeout = std::chrono::milliseconds(2000);
+  auto plain = net::Client::Connect(o);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FALSE((*plain)->ListVolumes().ok());
+  EXPECT_EQ(tls.Stop(SIGTERM), 0);
 }
 
 }  // namespace
