@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cmath>
 #include <fstream>
+#include <random>
 #include <sstream>
 #include <thread>
 
@@ -365,6 +366,74 @@ TEST_F(Daemon, ClientLeavingMidFrameFreesItsSession) {
   }
 }
 
+TEST_F(Daemon, ConcurrentFirstRequestsBuildOneHierarchy) {
+  auto c = Connect();
+  std::vector<std::thread> threads;
+  std::atomic<int> ok{0};
+  for (int i = 0; i < 3; ++i)  // the daemon's --max-sessions
+    threads.emplace_back([&, i] {
+      if (c->Fetch(MakeView("sphere:65", uint64_t(i), 0.05, glm::dvec3(2, 1, 3))).ok()) ++ok;
+    });
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(ok.load(), 3);
+  std::ifstream log(scratch_->path() + "/isostreamd.log");
+  std::string line;
+  int builds = 0;
+  while (std::getline(log, line)) builds += line.find("prepared volume 'sphere:65'") != line.npos;
+  EXPECT_EQ(builds, 1);
+}
+
+TEST_F(Daemon, MalformedRequestsNeverTakeItDown) {
+  auto c = Connect();
+  std::mt19937 rng(12345);
+  std::uniform_real_distribution<double> any(-1e3, 1e3);
+  const char* names[] = {
+      "buckyball:65",   "",         "x",         "buckyball:",          "buckyball:-3", "noise:9:x",
+      "buckyball:65:1", "sphere:0", "/dev/zero", "noise:17:99999999999"};
+  for (int i = 0; i < 120; ++i) {
+    pb::ViewRequest v;
+    v.set_volume(names[rng() % 10]);
+    v.set_request_id(rng());
+    const int surfaces = int(rng() % 6);
+    for (int k = 0; k < surfaces; ++k)
+      v.add_surfaces()->set_isovalue(rng() % 7 == 0 ? NAN : float(any(rng) * 1e-3));
+    switch (rng() % 4) {
+      case 0:
+        v.set_eps(any(rng));
+        break;
+      case 1:
+        v.set_eps(rng() % 2 ? INFINITY : NAN);
+        break;
+      case 2:
+        v.set_triangle_budget(int64_t(rng() % 20000) - 100);
+        break;
+      default:
+        break;
+    }
+    // Keep accepted requests cheap: a small mesh at most.
+    if (v.accuracy_case() == pb::ViewRequest::kEps && v.eps() >= 0 && v.eps() < 0.05)
+      v.set_eps(0.05);
+    auto* cam = v.mutable_camera();
+    cam->set_projection(pb::Projection(rng() % 3));
+    cam->mutable_eye()->set_x(rng() % 9 == 0 ? NAN : any(rng));
+    cam->mutable_target()->set_y(any(rng));
+    v.set_codec(pb::Codec(rng() % 3));
+    v.set_normals(pb::Normals(rng() % 3));
+    v.set_progressive(rng() % 2);
+    auto frame = c->Fetch(v);
+    if (!frame.ok()) {
+      const auto code = frame.status().code();
+      EXPECT_TRUE(code == absl::StatusCode::kInvalidArgument ||
+                  code == absl::StatusCode::kNotFound ||
+                  code == absl::StatusCode::kResourceExhausted)
+          << frame.status();
+    }
+  }
+  auto health = c->CheckHealth();
+  ASSERT_TRUE(health.ok()) << health.status();
+  EXPECT_TRUE(*health);
+}
+
 TEST_F(Daemon, StillServesAfterEverything) {
   auto c = Connect();
   auto frame = c->Fetch(MakeView("buckyball:65", 99, 0.01, glm::dvec3(-2, 3, 1)));
@@ -438,7 +507,8 @@ class ConfiguredDaemon : public Daemon {
     scratch_ = new ScratchDir();
     daemon_ = new DaemonProcess();
     const std::string config = scratch_->path() + "/isostreamd.json";
-    std::ofstream(config) << R"({"threads": 2, "volumes": {"ball": "buckyball:65"},
+    std::ofstream(config)
+        << R"({"threads": 2, "volumes": {"ball": "buckyball:65", "big": "buckyball:129"},
         "frames": {"chunk_triangles": 4096, "first_chunk_triangles": 1024,
                    "max_queued_chunks": 4}})";
     ASSERT_TRUE(daemon_->Start({"--config", config, "--cache-dir", scratch_->path() + "/cache"},
@@ -450,8 +520,9 @@ TEST_F(ConfiguredDaemon, ServesItsCatalogueOnly) {
   auto c = Connect();
   auto list = c->ListVolumes();
   ASSERT_TRUE(list.ok());
-  ASSERT_EQ(list->names_size(), 1);
+  ASSERT_EQ(list->names_size(), 2);
   EXPECT_EQ(list->names(0), "ball");
+  EXPECT_EQ(list->names(1), "big");
   EXPECT_FALSE(list->generators_allowed());
   EXPECT_EQ(c->Fetch(MakeView("buckyball:65", 1, 0.01, glm::dvec3(2, 2, 2))).status().code(),
             absl::StatusCode::kNotFound);
@@ -466,23 +537,35 @@ TEST_F(ConfiguredDaemon, ServesItsCatalogueOnly) {
 }
 
 TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
+  // A frame too big for the transport's buffers (raw, flat normals: ~85 bytes per triangle,
+  // ~690k triangles), read by a client that stops after the first chunk until the checks
+  // below are done: the frame is still in flight on the server while they run.
   auto c = Connect();
-  std::atomic<bool> started{false};
+  std::atomic<bool> started{false}, resume{false};
   absl::StatusOr<net::Frame> slow = absl::UnknownError("not run");
   std::thread reader([&] {
-    slow = c->Fetch(MakeView("ball", 5, 0.002, glm::dvec3(2, 2, 2), pb::RAW),
-                    [&](const pb::FrameChunk&) {
-                      started = true;
-                      std::this_thread::sleep_for(std::chrono::milliseconds(15));
-                    });
+    pb::ViewRequest v = MakeView("big", 5, 0.0, glm::dvec3(3, 2, 4), pb::RAW);
+    v.set_normals(pb::FLAT);
+    slow = c->Fetch(v, [&](const pb::FrameChunk&) {
+      started = true;
+      for (int i = 0; i < 1000 && !resume; ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    });
   });
-  for (int i = 0; i < 1000 && !started; ++i)
+  for (int i = 0; i < 2000 && !started; ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   ASSERT_TRUE(started);
+  // An idle session, open when the signal comes: it ends with UNAVAILABLE.
+  auto idle = c->OpenSession();
+  ASSERT_TRUE(idle.ok());
+  ASSERT_TRUE((*idle)->Send(MakeView("ball", 9, 0.05, glm::dvec3(2, 2, 2))).ok());
+  pb::FrameChunk chunk;
+  while ((*idle)->Read(&chunk) && !chunk.last()) {
+  }
   ASSERT_EQ(kill(daemon_->pid(), SIGTERM), 0);
   // While the frame drains: health NOT_SERVING and new streams refused.
   bool not_serving = false;
-  for (int i = 0; i < 100 && !not_serving; ++i) {
+  for (int i = 0; i < 200 && !not_serving; ++i) {
     auto h = Connect()->CheckHealth();
     not_serving = h.ok() && !*h;
     if (!not_serving) std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -490,6 +573,8 @@ TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
   EXPECT_TRUE(not_serving);
   EXPECT_EQ(Connect()->Fetch(MakeView("ball", 6, 0.05, glm::dvec3(2, 2, 2))).status().code(),
             absl::StatusCode::kUnavailable);
+  EXPECT_EQ((*idle)->Finish().code(), absl::StatusCode::kUnavailable);
+  resume = true;
   reader.join();
   ASSERT_TRUE(slow.ok()) << slow.status();
   EXPECT_EQ(slow->stats.triangles(), int64_t(slow->mesh.triangle_count()));
