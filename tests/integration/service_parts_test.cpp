@@ -1,0 +1,177 @@
+// The daemon's parts without a process: config parsing, catalogue names, quantization, and the
+// frame producer against a sink that never drains (bounded memory, deadline).
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <mutex>
+
+#include "server/service/catalogue.h"
+#include "server/service/config.h"
+#include "server/service/frame_producer.h"
+#include "tests/integration/daemon_process.h"
+
+namespace isostream::service {
+namespace {
+
+using testing::ScratchDir;
+
+absl::Status LoadText(const std::string& text, DaemonConfig* c) {
+  ScratchDir dir;
+  const std::string path = dir.path() + "/c.json";
+  std::ofstream(path) << text;
+  return LoadConfigFile(path, c);
+}
+
+TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
+  DaemonConfig c;
+  ASSERT_TRUE(LoadText(R"({"listen": "127.0.0.1:9", "volumes": {"a": "sphere:9"},
+                           "limits": {"max_sessions": 2}, "frames": {"chunk_triangles": 1024}})",
+                       &c)
+                  .ok());
+  EXPECT_EQ(c.listen, "127.0.0.1:9");
+  EXPECT_EQ(c.volumes.at("a"), "sphere:9");
+  EXPECT_EQ(c.limits.max_sessions, 2);
+  EXPECT_EQ(c.limits.max_isovalues, 16);  // untouched default
+  EXPECT_EQ(c.chunk_triangles, 1024);
+
+  absl::Status s = LoadText(R"({"limits": {"max_sesions": 2}})", &c);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("limits.max_sesions"), std::string::npos) << s;
+  s = LoadText(R"({"threads": "two"})", &c);
+  EXPECT_NE(s.message().find("threads"), std::string::npos) << s;
+  EXPECT_EQ(LoadText("{not json", &c).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LoadConfigFile("/nonexistent/x.json", &c).code(), absl::StatusCode::kNotFound);
+
+  DaemonConfig bad;
+  bad.chunk_triangles = 1 << 20;  // would not fit a gRPC message
+  EXPECT_FALSE(ValidateConfig(bad).ok());
+  bad = DaemonConfig();
+  bad.tls_cert = "cert.pem";  // no key
+  EXPECT_FALSE(ValidateConfig(bad).ok());
+  EXPECT_TRUE(ValidateConfig(DaemonConfig()).ok());
+}
+
+TEST(Catalogue, GeneratorNamesOnlyWithinTheLimit) {
+  CatalogueOptions o;
+  o.max_generator_dim = 65;
+  VolumeCatalogue generators(o);
+  EXPECT_TRUE(generators.Check("buckyball:65").ok());
+  EXPECT_TRUE(generators.Check("noise:33:7").ok());
+  for (const char* bad : {"buckyball:66", "buckyball:1", "buckyball", "buckyball:6x", "sphere:9:1",
+                          "/etc/passwd", "x.vdb", "raw:/a:2x2x2:f32", "noise:9:"})
+    EXPECT_EQ(generators.Check(bad).code(), absl::StatusCode::kNotFound) << bad;
+  o.volumes = {{"head", "/data/head.nii.gz"}};
+  VolumeCatalogue named(o);
+  EXPECT_TRUE(named.Check("head").ok());
+  EXPECT_EQ(named.Check("buckyball:65").code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(named.Check("/data/head.nii.gz").code(), absl::StatusCode::kNotFound);
+}
+
+TEST(Quantization, AtMostOneSixtyFourthVoxel) {
+  for (int n : {9, 65, 129, 513, 2049}) {
+    Volume v;
+    v.dims = {n, n / 2 + 1, n};
+    v.spacing = {0.5, 0.25, 0.5};
+    v.origin = {-3, 10, 0};
+    QuantizationBox box;
+    int bits;
+    QuantizationFor(v, &box, &bits);
+    EXPECT_LE(PositionErrorBound(box, bits), 0.25 / 64 * 1.01) << n;
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_LT(box.origin[a], v.origin[a]);
+      EXPECT_GT(box.origin[a] + box.range, v.origin[a] + v.spacing[a] * (v.dims[a] - 1));
+    }
+  }
+}
+
+// Never writes anything: Queued() is everything ever pushed.
+class StuckSink : public ChunkSink {
+ public:
+  bool Push(uint64_t, ::isostream::v1::FrameChunk&& chunk) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    chunks_.push_back(std::move(chunk));
+    return true;
+  }
+  size_t Queued() const override {
+    std::lock_guard<std::mutex> lock(mu_);
+    return chunks_.size();
+  }
+  std::vector<::isostream::v1::FrameChunk> chunks_;
+  mutable std::mutex mu_;
+};
+
+TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
+  CatalogueOptions o;
+  VolumeCatalogue catalogue(o);
+  auto volume = catalogue.Get("buckyball:65");
+  ASSERT_TRUE(volume.ok()) << volume.status();
+  WorkerPool encoders(2);
+  ServerCounters counters;
+  FrameSettings settings;
+  settings.chunk_triangles = 2048;
+  settings.first_chunk_triangles = 2048;
+  settings.max_queued_chunks = 4;
+  settings.deadline_ms = 300;
+  FrameProducer producer(settings, &encoders, &counters);
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  for (float iso : {0.05f, 0.15f}) view.add_surfaces()->set_isovalue(iso);
+  view.set_eps(0.002);
+  view.mutable_camera()->mutable_eye()->set_x(3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok()) << request.status();
+  std::atomic<bool> cancel{false};
+  StuckSink sink;
+  const absl::Status s =
+      producer.Run(**volume, view, *request, 1, &cancel, &sink, std::chrono::steady_clock::now());
+  EXPECT_EQ(s.code(), absl::StatusCode::kDeadlineExceeded) << s;
+  EXPECT_LE(sink.chunks_.size(), 4u);  // never more than max_queued_chunks held
+  for (size_t i = 0; i < sink.chunks_.size(); ++i) EXPECT_EQ(sink.chunks_[i].chunk_index(), i);
+}
+
+TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
+  CatalogueOptions o;
+  VolumeCatalogue catalogue(o);
+  auto volume = catalogue.Get("buckyball:65");
+  ASSERT_TRUE(volume.ok());
+  WorkerPool encoders(2);
+  ServerCounters counters;
+  FrameSettings settings;
+  settings.first_chunk_triangles = 1000;
+  settings.chunk_triangles = 7000;
+  settings.max_queued_chunks = 1000;
+  FrameProducer producer(settings, &encoders, &counters);
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  view.add_surfaces()->set_isovalue(0.1f);
+  view.set_eps(0.002);
+  view.mutable_camera()->mutable_eye()->set_y(-3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok());
+  std::atomic<bool> cancel{false};
+  StuckSink sink;
+  ASSERT_TRUE(
+      producer.Run(**volume, view, *request, 1, &cancel, &sink, std::chrono::steady_clock::now())
+          .ok());
+  auto direct =
+      Extract(*(*volume)->prepared.hierarchy, (*volume)->prepared.grid_to_world, *request);
+  ASSERT_TRUE(direct.ok());
+  ASSERT_GT(sink.chunks_.size(), 4u);
+  uint64_t next = 0;
+  for (size_t i = 0; i < sink.chunks_.size(); ++i) {
+    const auto& c = sink.chunks_[i];
+    EXPECT_EQ(c.chunk_index(), i);
+    EXPECT_EQ(c.first_triangle(), next);
+    if (i < 3) {
+      EXPECT_EQ(c.triangle_count(), std::min<uint32_t>(7000, 1000u << i));
+    }
+    EXPECT_EQ(c.last(), i + 1 == sink.chunks_.size());
+    next += c.triangle_count();
+  }
+  EXPECT_EQ(next, direct->mesh.triangle_count());
+  EXPECT_EQ(sink.chunks_.back().stats().triangles(), int64_t(next));
+  EXPECT_EQ(counters.frames_started.load(), 1);
+}
+
+}  // namespace
+}  // namespace isostream::service
