@@ -7,7 +7,6 @@
 // triangles first. Vertices on a subtree's boundary faces are merged by edge key on append.
 #include "server/extract/extractor.h"
 
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -294,18 +293,28 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   };
 
   arena.execute([&] {
-    tbb::enumerable_thread_specific<Scratch> scratch;
-    tbb::parallel_for(size_t(0), items.size(), [&](size_t i) {
-      if (observer && observer->cancel && observer->cancel->load(std::memory_order_relaxed)) {
-        cancelled = true;
-        return;
-      }
-      Traverser<true> t(c, &scratch.local().table, &parts[i]);
-      t.Run(items[i]);
-      std::lock_guard<std::mutex> lock(mu);
-      done[i] = 1;
-      while (next < items.size() && done[next] && !cancelled) append(parts[next++]);
-    });
+    // Workers take subtrees in draw order from a shared counter (not halves of the range, as
+    // parallel_for would), so the appended prefix grows steadily: appending overlaps
+    // extraction and the first triangles are ready early.
+    std::atomic<size_t> next_item{0};
+    const int workers = tbb::this_task_arena::max_concurrency();
+    tbb::parallel_for(
+        0, workers,
+        [&](int) {
+          Scratch scratch;
+          for (size_t i = next_item++; i < items.size(); i = next_item++) {
+            if (observer && observer->cancel && observer->cancel->load(std::memory_order_relaxed)) {
+              cancelled = true;
+              return;
+            }
+            Traverser<true> t(c, &scratch.table, &parts[i]);
+            t.Run(items[i]);
+            std::lock_guard<std::mutex> lock(mu);
+            done[i] = 1;
+            while (next < items.size() && done[next] && !cancelled) append(parts[next++]);
+          }
+        },
+        tbb::simple_partitioner());
   });
   if (cancelled) return absl::CancelledError("extraction cancelled");
   st.extract_ms = Ms(t0) - join_ms;
