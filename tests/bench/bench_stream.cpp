@@ -56,13 +56,18 @@ void CodecFigures(const OrderedMesh& mesh, const Volume& volume) {
     const char* name;
     bool raw;
     bool compress;
+    int position_bits_less;  // below the daemon's choice
+    int normal_bits;
   };
   for (const Variant& v :
-       {Variant{"draco sequential + connectivity", false, true},
-        Variant{"draco sequential", false, false}, Variant{"raw", true, false}}) {
+       {Variant{"draco sequential + connectivity", false, true, 0, 10},
+        Variant{"draco sequential", false, false, 0, 10}, Variant{"raw", true, false, 0, 0},
+        Variant{"  + conn, positions 1/32 voxel", false, true, 1, 10},
+        Variant{"  + conn, normals 8 bits", false, true, 0, 8},
+        Variant{"  + conn, 1/32 voxel, normals 8", false, true, 1, 8}}) {
     CodecOptions o;
-    o.position_bits = bits;
-    o.normal_bits = 10;
+    o.position_bits = bits - v.position_bits_less;
+    o.normal_bits = v.normal_bits;
     o.compress_connectivity = v.compress;
     o.position_box = box;
     size_t bytes = 0;
@@ -207,6 +212,44 @@ int main(int argc, char** argv) {
       (*session)->CloseSend().IgnoreError();
       (*session)->Finish().IgnoreError();
     }
+  }
+  // Progressive: the coarse frame (20k-triangle budget) first, then the refined one.
+  {
+    auto session = (*client)->OpenSession();
+    if (!session.ok()) return 1;
+    std::vector<double> first, coarse, refined;
+    for (int i = -1; i < views; ++i) {
+      pb::ViewRequest v;
+      v.set_volume(spec);
+      v.set_request_id(uint64_t(100 + i));
+      for (float iso : kIso) v.add_surfaces()->set_isovalue(iso);
+      v.set_eps(eps);
+      v.set_progressive(true);
+      const glm::dvec3 e = Eye(i + 1);
+      v.mutable_camera()->mutable_eye()->set_x(e.x);
+      v.mutable_camera()->mutable_eye()->set_y(e.y);
+      v.mutable_camera()->mutable_eye()->set_z(e.z);
+      const auto t0 = Clock::now();
+      if (!(*session)->Send(v).ok()) return 1;
+      pb::FrameChunk chunk;
+      double t_first = -1, t_coarse = -1;
+      while ((*session)->Read(&chunk)) {
+        if (chunk.frame_id() != v.request_id()) continue;
+        if (t_first < 0) t_first = Ms(t0, Clock::now());
+        if (chunk.last() && chunk.coarse()) t_coarse = Ms(t0, Clock::now());
+        if (chunk.last() && !chunk.coarse()) break;
+      }
+      if (i < 0) continue;
+      first.push_back(t_first);
+      coarse.push_back(t_coarse);
+      refined.push_back(Ms(t0, Clock::now()));
+    }
+    std::printf(
+        "\nprogressive (draco, not decoded): first chunk %.1f ms, coarse frame complete "
+        "%.1f ms, refined frame complete %.1f ms (medians)\n",
+        Median(first), Median(coarse), Median(refined));
+    (*session)->CloseSend().IgnoreError();
+    (*session)->Finish().IgnoreError();
   }
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
   return 0;
