@@ -194,6 +194,7 @@ class ChunkStream : public Reactor, public StreamBase {
   }
 
   void OnDone() override {
+    if (admitted_) spdlog::debug("{}: stream closed ({})", peer_, finish_status_.error_message());
     core_->Unregister(this, admitted_);
     std::shared_ptr<StreamBase> keep = std::move(self_);  // may destroy *this on return
   }
@@ -401,6 +402,7 @@ class SessionStream final
       std::lock_guard<std::mutex> lock(mu_);
       admitted_ = true;
     }
+    spdlog::debug("{}: session opened", peer_);
     StartRead(&incoming_);
   }
 
