@@ -113,7 +113,7 @@ absl::StatusOr<ExtractRequest> ToExtractRequest(const pb::ViewRequest& v, const 
 absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewRequest& view,
                                 const ExtractRequest& request, uint64_t generation,
                                 std::atomic<bool>* cancel, ChunkSink* sink,
-                                Clock::time_point received) const {
+                                Clock::time_point received, CoarseHint* hint) const {
   if (view.progressive()) {
     const int64_t coarse = settings_.coarse_triangles;
     bool want_coarse;
@@ -128,18 +128,35 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
     }
     if (want_coarse) {
       ExtractRequest c = request;
-      c.budget = coarse;
+      const bool hinted = hint && hint->eps >= 0 && hint->volume == view.volume() &&
+                          hint->isovalues == request.isovalues;
+      if (hinted) {
+        c.budget = 0;
+        c.eps = std::max(hint->eps, request.eps);
+      } else {
+        c.budget = coarse;
+      }
+      ExtractStats stats;
       ISOSTREAM_RETURN_IF_ERROR(
-          ProduceFrame(volume, view, c, true, generation, cancel, sink, received));
+          ProduceFrame(volume, view, c, true, generation, cancel, sink, received, &stats));
+      if (hint) {
+        hint->volume = view.volume();
+        hint->isovalues = request.isovalues;
+        // Keep a hinted eps while the size stays near the budget; search again otherwise.
+        const bool near = stats.triangles <= 2 * coarse && 4 * stats.triangles >= coarse;
+        hint->eps = !hinted || near ? stats.eps_used : -1.0;
+      }
     }
   }
-  return ProduceFrame(volume, view, request, false, generation, cancel, sink, received);
+  ExtractStats stats;
+  return ProduceFrame(volume, view, request, false, generation, cancel, sink, received, &stats);
 }
 
 absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
                                          const ExtractRequest& request, bool coarse,
                                          uint64_t generation, std::atomic<bool>* cancel,
-                                         ChunkSink* sink, Clock::time_point received) const {
+                                         ChunkSink* sink, Clock::time_point received,
+                                         ExtractStats* stats_out) const {
   counters_->frames_started.fetch_add(1);
   const auto deadline = received + std::chrono::milliseconds(settings_.deadline_ms);
   const bool raw = view.codec() == pb::RAW;
@@ -275,6 +292,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   auto result =
       Extract(*volume.prepared.hierarchy, volume.prepared.grid_to_world, request, &observer);
   bool last_cut = false;
+  if (result.ok()) *stats_out = result->stats;
   if (result.ok() && !cancel->load() && wait_for_room()) {
     cut(result->mesh, result->mesh.triangle_count() - cut_end, true, &result->stats);
     last_cut = true;

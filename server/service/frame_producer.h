@@ -15,6 +15,8 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <string>
+#include <vector>
 
 #include "proto/isostream.pb.h"
 #include "server/extract/extractor.h"
@@ -51,6 +53,15 @@ class ChunkSink {
 absl::StatusOr<ExtractRequest> ToExtractRequest(const pb::ViewRequest& view, const Limits& limits,
                                                 int threads);
 
+// What a stream remembers between views so that the coarse frame of a progressive request
+// can skip the budget search: after a camera move over the same volume and isovalues, the eps
+// that gave the last coarse frame its size gives about the same size again.
+struct CoarseHint {
+  std::string volume;
+  std::vector<float> isovalues;
+  double eps = -1;  // < 0: none yet
+};
+
 struct FrameSettings {
   int chunk_triangles = 65536;
   int first_chunk_triangles = 8192;
@@ -71,15 +82,19 @@ class FrameProducer {
   // by another thread at any time (a newer view, the client leaving); the producer also sets it
   // itself to stop early. Returns OK, CANCELLED, DEADLINE_EXCEEDED (limits.deadline_ms),
   // RESOURCE_EXHAUSTED (a frame over max_triangles) or the extractor's error.
+  // `hint` (may be null) is read and updated; one stream's views run one at a time, so it
+  // needs no lock.
   absl::Status Run(const ServedVolume& volume, const pb::ViewRequest& view,
                    const ExtractRequest& request, uint64_t generation, std::atomic<bool>* cancel,
-                   ChunkSink* sink, std::chrono::steady_clock::time_point received) const;
+                   ChunkSink* sink, std::chrono::steady_clock::time_point received,
+                   CoarseHint* hint = nullptr) const;
 
  private:
   absl::Status ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
                             const ExtractRequest& request, bool coarse, uint64_t generation,
                             std::atomic<bool>* cancel, ChunkSink* sink,
-                            std::chrono::steady_clock::time_point received) const;
+                            std::chrono::steady_clock::time_point received,
+                            ExtractStats* stats_out) const;
 
   FrameSettings settings_;
   WorkerPool* encoders_;

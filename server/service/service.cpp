@@ -336,14 +336,16 @@ class ChunkStream : public Reactor, public StreamBase {
     auto volume = core_->catalogue.Get(view.volume());
     if (!volume.ok()) return volume.status();
     if (cancel->load()) return absl::CancelledError("superseded");
-    return core_->producer.Run(**volume, view, request, generation, cancel, this, received);
+    return core_->producer.Run(**volume, view, request, generation, cancel, this, received,
+                               &coarse_hint_);
   }
 
   ServiceCore* core_;
   grpc::CallbackServerContext* context_;  // valid until OnDone; jobs may outlive it
   const std::string peer_;
   std::shared_ptr<StreamBase> self_;
-  bool admitted_ = false;  // holds a session slot (set before any other thread sees the stream)
+  bool admitted_ = false;   // holds a session slot (set before any other thread sees the stream)
+  CoarseHint coarse_hint_;  // used by the one running job only
 
   mutable std::mutex mu_;
   std::deque<pb::FrameChunk> queue_;
