@@ -232,22 +232,36 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
           uint32_t((((c >> b) * brick_stride) << (3 * b)) | ((c & m) << (a * b)));
   }
   h->bricks_.resize(nb * nb * nb);
-  // Points of partial bricks beyond the cube are never read; zero them all the same so the
-  // store is deterministic. Bricks are first touched here, in parallel.
+  // Fill brick by brick (each written once, whole, by one thread, which also first-touches
+  // its pages). Points of partial bricks beyond the cube are never read; they get zeros so
+  // the store is deterministic.
   HierarchyBrick* bricks = h->bricks_.data();
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, nb * nb * nb),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      std::memset(static_cast<void*>(bricks + r.begin()), 0,
-                                  (r.end() - r.begin()) * sizeof(HierarchyBrick));
-                    });
-  const Hierarchy& hc = *h;
-  hc.ForEachRow([&](int y, int z, size_t row) {
-    for (int x = 0; x < samples.n; ++x) {
-      const size_t i = hc.index(x, y, z);
-      bricks[i >> 9].value[i & 511] = samples.values[row + x];
-      bricks[i >> 9].eta[i & 511] = EncodeEtaRoundingUp(eta[row + x]);
-    }
-  });
+  const int cube = samples.n;
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, nb * nb), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t zy = r.begin(); zy != r.end(); ++zy) {
+          const int bz = int(zy / nb), by = int(zy % nb);
+          for (size_t bx = 0; bx < nb; ++bx) {
+            HierarchyBrick& brick = bricks[zy * nb + bx];
+            for (int lz = 0; lz <= m; ++lz)
+              for (int ly = 0; ly <= m; ++ly) {
+                const int z = (bz << b) + lz, y = (by << b) + ly, x0 = int(bx << b);
+                const int local = (lz << (2 * b)) | (ly << b);
+                const int inside =
+                    z < cube && y < cube ? std::max(0, std::min(m + 1, cube - x0)) : 0;
+                const size_t row = (size_t(z) * n + y) * n + x0;
+                for (int lx = 0; lx < inside; ++lx) {
+                  brick.value[local + lx] = samples.values[row + lx];
+                  brick.eta[local + lx] = EncodeEtaRoundingUp(eta[row + lx]);
+                }
+                for (int lx = inside; lx <= m; ++lx) {
+                  brick.value[local + lx] = 0.0f;
+                  brick.eta[local + lx] = 0;
+                }
+              }
+          }
+        }
+      });
   return HierarchyPtr(std::move(h));
 }
 
