@@ -79,7 +79,9 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
     std::lock_guard<std::mutex> lock(mu_);
     auto& e = entries_[name];
     if (!e) e = std::make_shared<Entry>();
+    e->last_use = ++use_clock_;
     entry = e;
+    if (options_.volumes.empty()) DropLeastRecentlyUsedLocked(name);
   }
   std::lock_guard<std::mutex> build_lock(entry->build_mu);
   if (entry->served) return entry->served;
@@ -110,6 +112,30 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
   entry->served = served;
   prepared_.fetch_add(1);
   return entry->served;
+}
+
+void VolumeCatalogue::DropLeastRecentlyUsedLocked(const std::string& keep) {
+  while (entries_.size() > size_t(std::max(1, options_.max_generator_volumes))) {
+    // Entries being built are skipped (their build mutex is held): dropping one would let a
+    // second request start a second build of the same volume.
+    auto oldest = entries_.end();
+    for (auto it = entries_.begin(); it != entries_.end(); ++it) {
+      if (it->first == keep) continue;
+      if (oldest != entries_.end() && it->second->last_use >= oldest->second->last_use) continue;
+      std::unique_lock<std::mutex> idle(it->second->build_mu, std::try_to_lock);
+      if (idle.owns_lock()) oldest = it;
+    }
+    if (oldest == entries_.end()) return;  // over the limit until a build ends
+    spdlog::info("dropping volume '{}' (least recently used of {} generator volumes)",
+                 oldest->first, entries_.size());
+    // A build or frames in progress hold their own references; the memory goes when they end.
+    entries_.erase(oldest);
+  }
+}
+
+int VolumeCatalogue::held_count() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return int(entries_.size());
 }
 
 std::vector<std::string> VolumeCatalogue::Names() const {

@@ -39,6 +39,10 @@ struct CatalogueOptions {
   VolumeLimits limits;
   HierarchyCacheOptions cache;
   int build_threads = 0;
+  // Generator volumes kept prepared at once (without a catalogue any client can name up to
+  // 5 x max_generator_dim of them, each up to 257^3 x 8 bytes): the least recently used is
+  // dropped beyond this. Frames in progress keep their volume alive until they end.
+  int max_generator_volumes = 8;
 };
 
 // The box and bit count for a volume's frames: bits = the fewest that make the quantization
@@ -60,17 +64,23 @@ class VolumeCatalogue {
   std::vector<std::string> Names() const;
   bool generators_allowed() const { return options_.volumes.empty(); }
   int max_generator_dim() const { return options_.max_generator_dim; }
+  // Volumes prepared since start (a dropped and re-prepared generator counts twice).
   int prepared_count() const { return prepared_.load(); }
+  // Volumes held now.
+  int held_count() const;
 
  private:
   struct Entry {
     std::mutex build_mu;  // held while preparing, so one build per volume
     ServedVolumePtr served;
+    uint64_t last_use = 0;  // under the catalogue's mu_
   };
+  void DropLeastRecentlyUsedLocked(const std::string& keep);
   CatalogueOptions options_;
   mutable std::mutex mu_;
   std::map<std::string, std::shared_ptr<Entry>> entries_;
   std::atomic<int> prepared_{0};
+  uint64_t use_clock_ = 0;
 };
 
 }  // namespace isostream::service

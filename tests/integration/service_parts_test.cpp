@@ -67,6 +67,24 @@ TEST(Catalogue, GeneratorNamesOnlyWithinTheLimit) {
   EXPECT_EQ(named.Check("/data/head.nii.gz").code(), absl::StatusCode::kNotFound);
 }
 
+TEST(Catalogue, KeepsABoundedNumberOfGeneratorVolumes) {
+  CatalogueOptions o;
+  o.max_generator_volumes = 2;
+  VolumeCatalogue catalogue(o);
+  auto first = catalogue.Get("sphere:9");
+  ASSERT_TRUE(first.ok());
+  ASSERT_TRUE(catalogue.Get("sphere:10").ok());
+  ASSERT_TRUE(catalogue.Get("sphere:9").ok());   // now the most recent
+  ASSERT_TRUE(catalogue.Get("sphere:11").ok());  // drops sphere:10
+  EXPECT_EQ(catalogue.held_count(), 2);
+  EXPECT_EQ(catalogue.prepared_count(), 3);
+  auto again = catalogue.Get("sphere:9");
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->get(), first->get());  // kept, not rebuilt
+  ASSERT_TRUE(catalogue.Get("sphere:10").ok());
+  EXPECT_EQ(catalogue.prepared_count(), 4);  // rebuilt after being dropped
+}
+
 TEST(Quantization, AtMostOneSixtyFourthVoxel) {
   for (int n : {9, 65, 129, 513, 2049}) {
     Volume v;
