@@ -61,6 +61,11 @@ int Run(const DaemonConfig& config) {
   // Requests are small; frames go out in chunks below gRPC's default 4 MiB limit.
   builder.SetMaxReceiveMessageSize(1 << 20);
   builder.SetMaxSendMessageSize(4 << 20);
+  // Pings find clients that vanished without closing their connection (a laptop lid, a cut
+  // cable), so their sessions are freed instead of holding a slot until the process restarts.
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 60'000);
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 20'000);
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || port == 0) {
     spdlog::critical("cannot listen on {}", config.listen);
