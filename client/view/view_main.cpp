@@ -1,0 +1,312 @@
+// isostream-view: the thin client. It opens a Session with isostreamd, sends a view, decodes
+// the chunks as they arrive and uploads them in arrival order; the triangles come already
+// sorted back to front, so drawing them in that order with alpha blending is the whole job.
+// Headless by default (EGL surfaceless/device, PNG out); --orbit N writes N views around the
+// volume, each one a fresh frame ordered by the server for its own eye.
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <glm/trigonometric.hpp>
+#include <string>
+#include <vector>
+
+#include "client/net/session_client.h"
+#include "client/render/camera.h"
+#include "client/render/headless_context.h"
+#include "client/render/image.h"
+#include "client/render/mesh_renderer.h"
+
+namespace isostream::view {
+namespace {
+
+namespace pb = ::isostream::v1;
+
+struct Args {
+  std::string server = "127.0.0.1:7878";
+  std::string volume;
+  std::string iso;
+  double eps = -1;
+  int64_t budget = -1;
+  std::string eye;
+  std::string size = "800x800";
+  std::string output;
+  std::string token;
+  std::string codec = "draco";
+  int orbit = 0;
+  bool window = false;
+  bool progressive = true;
+};
+
+absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what) {
+  std::vector<double> out;
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t end = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, end - start);
+    char* stop = nullptr;
+    const double v = std::strtod(item.c_str(), &stop);
+    if (item.empty() || stop != item.c_str() + item.size() || !std::isfinite(v))
+      return absl::InvalidArgumentError(std::string(what) + ": '" + item + "' is not a number");
+    out.push_back(v);
+    start = end + 1;
+  }
+  return out;
+}
+
+std::string NumberedPath(const std::string& path, int index) {
+  char suffix[16];
+  std::snprintf(suffix, sizeof(suffix), "_%03d", index);
+  const size_t dot = path.find_last_of('.');
+  const size_t slash = path.find_last_of('/');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return path + suffix;
+  return path.substr(0, dot) + suffix + path.substr(dot);
+}
+
+pb::Vec3 ToPb(const glm::vec3& v) {
+  pb::Vec3 out;
+  out.set_x(v.x);
+  out.set_y(v.y);
+  out.set_z(v.z);
+  return out;
+}
+
+// Receives one view's frame: chunks are uploaded as they arrive into the renderer's pending
+// frame, which replaces the shown one whole when complete. Coarse frames of a progressive view
+// are shown on the way (a window would display them); the refined frame is returned.
+absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_id,
+                                        render::MeshRenderer& renderer, int* coarse_frames) {
+  net::FrameAssembler assembler;
+  pb::FrameChunk chunk;
+  bool frame_open = false;
+  while (session.Read(&chunk)) {
+    if (chunk.frame_id() != request_id) continue;  // an older view's frame, superseded
+    const size_t before = assembler.frame().mesh.triangle_count();
+    const bool starts = chunk.chunk_index() == 0;
+    ISOSTREAM_RETURN_IF_ERROR(assembler.Add(chunk));
+    if (starts) {
+      renderer.BeginFrame();
+      frame_open = true;
+    }
+    const net::Frame& f = assembler.frame();
+    if (frame_open && f.mesh.triangle_count() > before)
+      ISOSTREAM_RETURN_IF_ERROR(
+          renderer.AddChunk(f.mesh, before, f.mesh.triangle_count() - before));
+    if (!assembler.complete()) continue;
+    ISOSTREAM_RETURN_IF_ERROR(renderer.EndFrame());
+    frame_open = false;
+    if (assembler.frame().coarse) {
+      ++*coarse_frames;
+      continue;
+    }
+    return assembler.Take();
+  }
+  const absl::Status status = session.Finish();
+  if (!status.ok()) return status;
+  return absl::UnavailableError("the server closed the stream before the frame was complete");
+}
+
+render::Camera FitToMesh(render::Camera camera, const OrderedMesh& mesh) {
+  if (mesh.vertex_count() == 0) return camera;
+  glm::vec3 lo(mesh.positions[0], mesh.positions[1], mesh.positions[2]), hi = lo;
+  for (size_t i = 0; i < mesh.vertex_count(); ++i) {
+    const glm::vec3 p(mesh.positions[3 * i], mesh.positions[3 * i + 1], mesh.positions[3 * i + 2]);
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  const glm::vec3 center = 0.5f * (lo + hi);
+  const float radius = std::max(0.5f * glm::length(hi - lo), 1e-6f);
+  const float distance = glm::length(camera.eye - center);
+  if (distance <= radius * 1.05f) return camera;  // eye inside: keep the volume framing
+  if (camera.projection == render::Projection::kPerspective) {
+    camera.target = center;
+    camera.fov_y_degrees = std::min(170.0f, 2.1f * glm::degrees(std::asin(radius / distance)));
+    if (camera.aspect < 1) {
+      const float half =
+          std::atan(std::tan(glm::radians(camera.fov_y_degrees) / 2) / camera.aspect);
+      camera.fov_y_degrees = std::min(170.0f, glm::degrees(2 * half));
+    }
+  }
+  camera.near_plane = std::max(1e-3f * distance, distance - 1.1f * radius);
+  camera.far_plane = distance + 1.1f * radius;
+  return camera;
+}
+
+int Fail(const absl::Status& status) {
+  std::fprintf(stderr, "isostream-view: %s\n", std::string(status.message()).c_str());
+  return 1;
+}
+
+int Run(const Args& args) {
+  if (args.window) {
+    const char* display = std::getenv("DISPLAY");
+    const char* wayland = std::getenv("WAYLAND_DISPLAY");
+    if ((!display || !*display) && (!wayland || !*wayland)) {
+      std::fprintf(stderr,
+                   "isostream-view: --window needs a display, and neither DISPLAY nor "
+                   "WAYLAND_DISPLAY is set; render headless with -o frame.png instead\n");
+    } else {
+      std::fprintf(stderr,
+                   "isostream-view: this build has no windowing backend (GLFW/X11 not linked); "
+                   "render headless with -o frame.png\n");
+    }
+    return 2;
+  }
+  if (args.output.empty()) return Fail(absl::InvalidArgumentError("give -o frame.png"));
+  int width = 0, height = 0;
+  char tail = 0;
+  if (std::sscanf(args.size.c_str(), "%dx%d%c", &width, &height, &tail) != 2 || width < 1 ||
+      height < 1 || width > 16384 || height > 16384)
+    return Fail(absl::InvalidArgumentError("--size: '" + args.size + "' is not WxH"));
+
+  net::ClientOptions options;
+  options.address = args.server;
+  options.token = args.token;
+  auto client = net::Client::Connect(options);
+  if (!client.ok()) return Fail(client.status());
+  auto info = (*client)->GetVolumeInfo(args.volume);
+  if (!info.ok()) return Fail(info.status());
+
+  // The volume's box frames the default camera and gives default isovalues.
+  glm::vec3 lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    const float s = a == 0   ? info->spacing().x()
+                    : a == 1 ? info->spacing().y()
+                             : info->spacing().z();
+    const float o = a == 0 ? info->origin().x() : a == 1 ? info->origin().y() : info->origin().z();
+    lo[a] = o;
+    hi[a] = o + s * float(info->dims(a) - 1);
+  }
+  std::vector<double> iso;
+  if (args.iso.empty()) {
+    for (double f : {0.2, 0.4, 0.6})
+      iso.push_back(info->min_value() + f * (info->max_value() - info->min_value()));
+  } else {
+    auto parsed = ParseNumbers(args.iso, "--iso");
+    if (!parsed.ok()) return Fail(parsed.status());
+    iso = *parsed;
+  }
+  render::Camera base;
+  base.aspect = float(width) / float(height);
+  base.up = {0, 1, 0};
+  glm::vec3 direction(0.8f, 0.6f, 1.0f);
+  const glm::vec3 center = 0.5f * (lo + hi);
+  render::Camera camera = render::FrameBox(lo, hi, direction, base);
+  if (!args.eye.empty()) {
+    auto e = ParseNumbers(args.eye, "--eye");
+    if (!e.ok()) return Fail(e.status());
+    if (e->size() != 3) return Fail(absl::InvalidArgumentError("--eye needs x,y,z"));
+    direction = glm::vec3((*e)[0], (*e)[1], (*e)[2]) - center;
+    if (glm::length(direction) == 0)
+      return Fail(absl::InvalidArgumentError("--eye is at the volume's centre"));
+    // Keep the given eye: aim at the centre, open the field of view to the bounding sphere and
+    // put near and far around it (FrameBox's own planes belong to its own eye distance).
+    const glm::vec3 eye((*e)[0], (*e)[1], (*e)[2]);
+    const float radius = 0.5f * glm::length(hi - lo);
+    const float distance = glm::length(eye - center);
+    camera = base;
+    camera.eye = eye;
+    camera.target = center;
+    camera.fov_y_degrees = distance > radius
+                               ? std::min(170.0f, 2.1f * glm::degrees(std::asin(radius / distance)))
+                               : 90.0f;
+    camera.near_plane = std::max(1e-3f * distance, distance - 1.1f * radius);
+    camera.far_plane = distance + 1.1f * radius;
+  }
+
+  render::HeadlessContextOptions ctx_options;
+  ctx_options.width = width;
+  ctx_options.height = height;
+  auto context = render::HeadlessContext::Create(ctx_options);
+  if (!context.ok()) return Fail(context.status());
+  auto renderer = render::MeshRenderer::Create();
+  if (!renderer.ok()) return Fail(renderer.status());
+  render::Palette palette = render::DefaultPalette();
+  (*renderer)->SetPalette(palette);
+
+  auto session = (*client)->OpenSession();
+  if (!session.ok()) return Fail(session.status());
+  const std::vector<render::Camera> cameras = args.orbit > 0
+                                                  ? render::OrbitCameras(camera, args.orbit)
+                                                  : std::vector<render::Camera>{camera};
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    const render::Camera& cam = cameras[i];
+    pb::ViewRequest view;
+    view.set_volume(args.volume);
+    view.set_request_id(i + 1);
+    *view.mutable_camera()->mutable_eye() = ToPb(cam.eye);
+    *view.mutable_camera()->mutable_target() = ToPb(cam.target);
+    *view.mutable_camera()->mutable_up() = ToPb(cam.up);
+    for (size_t s = 0; s < iso.size(); ++s) {
+      pb::Surface* surface = view.add_surfaces();
+      surface->set_isovalue(float(iso[s]));
+      const render::SurfaceStyle& style = palette[s % palette.size()];
+      surface->set_r(style.color.r);
+      surface->set_g(style.color.g);
+      surface->set_b(style.color.b);
+      surface->set_a(style.opacity);
+    }
+    if (args.budget != -1) {
+      view.set_triangle_budget(args.budget);
+    } else {
+      view.set_eps(args.eps >= 0 ? args.eps : 0.002 * (info->max_value() - info->min_value()));
+    }
+    view.set_codec(args.codec == "raw" ? pb::RAW : pb::DRACO);
+    view.set_progressive(args.progressive);
+    const auto t0 = std::chrono::steady_clock::now();
+    const absl::Status sent = (*session)->Send(view);
+    if (!sent.ok()) return Fail(sent);
+    int coarse = 0;
+    auto frame = ReceiveFrame(**session, i + 1, **renderer, &coarse);
+    if (!frame.ok()) return Fail(frame.status());
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    // The draw order depends on the eye only, so the field of view can wait for the frame:
+    // aim at the mesh's bounding sphere from the same eye.
+    const absl::Status drawn = (*renderer)->Render(FitToMesh(cam, frame->mesh));
+    if (!drawn.ok()) return Fail(drawn);
+    auto image = (*context)->ReadPixels();
+    if (!image.ok()) return Fail(image.status());
+    const std::string path = args.orbit > 0 ? NumberedPath(args.output, int(i)) : args.output;
+    const absl::Status written = render::WritePng(*image, path);
+    if (!written.ok()) return Fail(written);
+    std::printf(
+        "%s: %lld triangles in %d chunks (%.1f KiB), eps %g, %d coarse frame(s) first, %.0f ms\n",
+        path.c_str(), (long long)frame->mesh.triangle_count(), frame->chunks, frame->bytes / 1024.0,
+        frame->stats.eps_used(), coarse, ms);
+  }
+  (*session)->CloseSend().IgnoreError();
+  const absl::Status finished = (*session)->Finish();
+  if (!finished.ok() && finished.code() != absl::StatusCode::kCancelled) return Fail(finished);
+  return 0;
+}
+
+}  // namespace
+}  // namespace isostream::view
+
+int main(int argc, char** argv) {
+  isostream::view::Args args;
+  CLI::App app{
+      "isostream-view: draw isostreamd's view-ordered transparent isosurfaces (headless, PNG)"};
+  app.add_option("--server", args.server, "daemon address (default 127.0.0.1:7878)");
+  app.add_option("--volume", args.volume, "catalogue name, e.g. buckyball:129")->required();
+  app.add_option("--iso", args.iso, "isovalues, comma separated (default: 20/40/60% of the range)");
+  auto* eps = app.add_option("--eps", args.eps, "error bound in data units");
+  auto* budget = app.add_option("--budget", args.budget, "triangle budget");
+  eps->excludes(budget);
+  app.add_option("--eye", args.eye, "perspective eye x,y,z (default: framing the volume)");
+  app.add_option("--size", args.size, "image size WxH (default 800x800)");
+  app.add_option("-o,--output", args.output, "PNG to write (with --orbit: name_000.png, ...)");
+  app.add_option("--orbit", args.orbit, "write N views on a full turn around the volume")
+      ->check(CLI::Range(1, 3600));
+  app.add_option("--token", args.token, "bearer token");
+  app.add_option("--codec", args.codec, "draco (default) or raw")
+      ->check(CLI::IsMember({"draco", "raw"}));
+  app.add_flag("--window", args.window, "interactive window (needs a display)");
+  CLI11_PARSE(app, argc, argv);
+  return isostream::view::Run(args);
+}
