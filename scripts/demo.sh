@@ -1,16 +1,34 @@
 #!/usr/bin/env bash
-# The main job on a built-in volume: set up, build, then load buckyball:129, build its
-# hierarchy (cached on disk), and extract three transparent isosurfaces, triangles already in
-# back-to-front order for the eye, to out/buckyball.ply and out/buckyball.glb.
+# The main job on a built-in volume: set up, build, start isostreamd on 127.0.0.1 (a free
+# port), and let the thin client isostream-view render buckyball:129's three transparent
+# isosurfaces, streamed already sorted back to front, to out/buckyball.png. Also writes the
+# same frame with the CLI to out/buckyball.ply and out/buckyball.glb.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/install-deps.sh
 ./scripts/build.sh
 VOLUME=${VOLUME:-buckyball:129}
 ISO=${ISO:-0.05,0.15,0.25}
+EYE=${EYE:-2.2,1.6,2.8}
 mkdir -p out
+
 ./build/server/isostream info --volume "$VOLUME"
-./build/server/isostream extract --volume "$VOLUME" --iso "$ISO" --eps 0.01 \
-  --eye 2.2,1.6,2.8 -o out/buckyball.ply --stats
-./build/server/isostream extract --volume "$VOLUME" --iso "$ISO" --budget 200000 \
-  --eye 2.2,1.6,2.8 -o out/buckyball.glb
+./build/server/isostream extract --volume "$VOLUME" --iso "$ISO" --eps 0.005 --eye "$EYE" \
+  -o out/buckyball.ply --stats
+./build/server/isostream extract --volume "$VOLUME" --iso "$ISO" --budget 200000 --eye "$EYE" \
+  -o out/buckyball.glb
+
+log=$(mktemp)
+./build/server/isostreamd --listen 127.0.0.1:0 > "$log" 2>&1 &
+daemon=$!
+trap 'kill "$daemon" 2>/dev/null || true; wait "$daemon" 2>/dev/null || true; rm -f "$log"' EXIT
+for _ in $(seq 100); do
+  grep -q "listening on" "$log" && break
+  sleep 0.1
+done
+port=$(grep -m1 -oE "listening on [0-9.]+:[0-9]+" "$log" | sed 's/.*://')
+[ -n "$port" ] || { cat "$log"; echo "isostreamd did not start"; exit 1; }
+echo "isostreamd on 127.0.0.1:$port"
+./build/client/view/isostream-view --server "127.0.0.1:$port" --volume "$VOLUME" --iso "$ISO" \
+  --eps 0.005 --eye "$EYE" --size 800x800 -o out/buckyball.png
+echo "wrote out/buckyball.png"
