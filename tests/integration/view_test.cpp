@@ -1,0 +1,110 @@
+// isostream-view end to end: a real daemon on 127.0.0.1, the real viewer binary, real PNGs;
+// and the failures a thin client meets (server gone, wrong address, unknown volume, corrupt
+// chunk bytes) give a clear error and a non-zero exit.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <string>
+
+#include "client/net/session_client.h"
+#include "client/render/image.h"
+#include "daemon_process.h"
+
+namespace isostream {
+namespace {
+
+struct ViewRun {
+  int code;
+  std::string output;
+};
+
+ViewRun View(const std::string& args) {
+  const std::string cmd = std::string(ISOSTREAM_VIEW_PATH) + " " + args + " 2>&1";
+  ViewRun r{-1, ""};
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return r;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+// Fraction of pixels that are not the (white) background.
+double Coverage(const render::Image& image) {
+  size_t covered = 0;
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x) {
+      const uint8_t* p = image.pixel(x, y);
+      covered += p[0] < 240 || p[1] < 240 || p[2] < 240;
+    }
+  return double(covered) / (double(image.width) * image.height);
+}
+
+TEST(View, RendersStreamedFramesAndFailsClearly) {
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
+  const std::string png = dir.path() + "/bucky.png";
+  const ViewRun ok = View("--server " + daemon.address() +
+                          " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01 --eye 2.2,1.6,2.8"
+                          " --size 200x160 -o " + png);
+  ASSERT_EQ(ok.code, 0) << ok.output;
+  auto image = render::ReadPng(png);
+  ASSERT_TRUE(image.ok()) << image.status();
+  EXPECT_EQ(image->width, 200);
+  EXPECT_EQ(image->height, 160);
+  EXPECT_GT(Coverage(*image), 0.1) << "the surfaces should fill a good part of the picture";
+
+  // An orbit asks the server for a new, newly ordered frame per view.
+  const ViewRun orbit = View("--server " + daemon.address() +
+                             " --volume sphere:33 --iso 0.3,0.6 --budget 5000 --orbit 3 --size 64x64 -o " +
+                             dir.path() + "/orbit.png");
+  ASSERT_EQ(orbit.code, 0) << orbit.output;
+  for (const char* name : {"orbit_000.png", "orbit_001.png", "orbit_002.png"})
+    EXPECT_TRUE(render::ReadPng(dir.path() + "/" + name).ok()) << name;
+
+  const ViewRun unknown = View("--server " + daemon.address() + " --volume nosuch:9 -o " + png);
+  EXPECT_NE(unknown.code, 0);
+  EXPECT_NE(unknown.output.find("nosuch:9"), std::string::npos) << unknown.output;
+
+  const ViewRun bad_eps = View("--server " + daemon.address() +
+                               " --volume sphere:17 --iso 0.5 --eps -3 -o " + png);
+  EXPECT_NE(bad_eps.code, 0);
+  EXPECT_NE(bad_eps.output.find("eps"), std::string::npos) << bad_eps.output;
+
+  const std::string address = daemon.address();
+  EXPECT_EQ(daemon.Stop(), 0);
+  const ViewRun gone = View("--server " + address + " --volume buckyball:65 -o " + png);
+  EXPECT_NE(gone.code, 0);
+  EXPECT_FALSE(gone.output.empty());
+
+  const ViewRun wrong = View("--server 127.0.0.1:1 --volume buckyball:65 -o " + png);
+  EXPECT_NE(wrong.code, 0);
+  EXPECT_NE(wrong.output.find("127.0.0.1:1"), std::string::npos) << wrong.output;
+
+  const ViewRun window = View("--server 127.0.0.1:1 --volume buckyball:65 --window");
+  EXPECT_NE(window.code, 0);
+  EXPECT_NE(window.output.find("display"), std::string::npos) << window.output;
+}
+
+TEST(View, CorruptChunkBytesAreAnErrorNotACrash) {
+  net::FrameAssembler assembler;
+  ::isostream::v1::FrameChunk chunk;
+  chunk.set_frame_id(1);
+  chunk.set_chunk_index(0);
+  chunk.set_last(true);
+  chunk.set_chunk_count(1);
+  chunk.set_triangle_count(100);
+  chunk.set_data(std::string("ISC1 this is not a chunk at all \x01\x02\x03", 36));
+  const absl::Status status = assembler.Add(chunk);
+  EXPECT_FALSE(status.ok());
+  EXPECT_FALSE(assembler.complete());
+}
+
+}  // namespace
+}  // namespace isostream
