@@ -30,7 +30,7 @@ struct Args {
   std::string server = "127.0.0.1:7878";
   std::string volume;
   std::string iso;
-  double eps = -1;
+  double eps = std::nan("");  // NaN: not given
   int64_t budget = -1;
   std::string eye;
   std::string size = "800x800";
@@ -253,7 +253,10 @@ int Run(const Args& args) {
     if (args.budget != -1) {
       view.set_triangle_budget(args.budget);
     } else {
-      view.set_eps(args.eps >= 0 ? args.eps : 0.002 * (info->max_value() - info->min_value()));
+      // Not given: 0.2% of the value range. Given values go to the server as they are: it
+      // validates them and says what is wrong.
+      view.set_eps(!std::isnan(args.eps) ? args.eps
+                                         : 0.002 * (info->max_value() - info->min_value()));
     }
     view.set_codec(args.codec == "raw" ? pb::RAW : pb::DRACO);
     view.set_progressive(args.progressive);
