@@ -24,6 +24,7 @@
 #include "client/render/headless_context.h"
 #include "client/render/image.h"
 #include "client/render/mesh_renderer.h"
+#include "shared/number_list.h"
 #include "shared/ply_io.h"
 
 namespace isostream::render {
@@ -44,21 +45,10 @@ struct Args {
 
 absl::StatusOr<std::vector<float>> ParseFloats(const std::string& text, const char* what,
                                                size_t expected) {
-  std::vector<float> out;
-  size_t start = 0;
-  while (start <= text.size()) {
-    const size_t end = std::min(text.find(',', start), text.size());
-    const std::string item = text.substr(start, end - start);
-    char* stop = nullptr;
-    const double v = std::strtod(item.c_str(), &stop);
-    if (item.empty() || stop != item.c_str() + item.size() || !std::isfinite(v))
-      return absl::InvalidArgumentError(absl::StrCat(what, ": '", item, "' is not a number"));
-    out.push_back(float(v));
-    start = end + 1;
-  }
-  if (out.size() != expected)
+  ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> numbers, ParseNumberList(text, what));
+  if (numbers.size() != expected)
     return absl::InvalidArgumentError(absl::StrCat(what, " needs ", expected, " numbers"));
-  return out;
+  return std::vector<float>(numbers.begin(), numbers.end());
 }
 
 absl::StatusOr<glm::vec3> ParseVec3(const std::string& text, const char* what) {

@@ -20,6 +20,7 @@
 #include "client/render/headless_context.h"
 #include "client/render/image.h"
 #include "client/render/mesh_renderer.h"
+#include "shared/number_list.h"
 
 namespace isostream::view {
 namespace {
@@ -43,19 +44,7 @@ struct Args {
 };
 
 absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what) {
-  std::vector<double> out;
-  size_t start = 0;
-  while (start <= text.size()) {
-    const size_t end = std::min(text.find(',', start), text.size());
-    const std::string item = text.substr(start, end - start);
-    char* stop = nullptr;
-    const double v = std::strtod(item.c_str(), &stop);
-    if (item.empty() || stop != item.c_str() + item.size() || !std::isfinite(v))
-      return absl::InvalidArgumentError(std::string(what) + ": '" + item + "' is not a number");
-    out.push_back(v);
-    start = end + 1;
-  }
-  return out;
+  return ParseNumberList(text, what);
 }
 
 std::string NumberedPath(const std::string& path, int index) {

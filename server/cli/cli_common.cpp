@@ -5,6 +5,8 @@
 #include <cstdlib>
 #include <glm/geometric.hpp>
 
+#include "shared/number_list.h"
+
 namespace isostream::cli {
 
 void AddVolumeOptions(CLI::App* cmd, VolumeArgs* args) {
@@ -60,19 +62,7 @@ void AddViewOptions(CLI::App* cmd, ViewArgs* args) {
 }
 
 absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what) {
-  std::vector<double> out;
-  size_t start = 0;
-  while (start <= text.size()) {
-    const size_t end = std::min(text.find(',', start), text.size());
-    const std::string item = text.substr(start, end - start);
-    char* stop = nullptr;
-    const double v = std::strtod(item.c_str(), &stop);
-    if (item.empty() || stop != item.c_str() + item.size() || !std::isfinite(v))
-      return absl::InvalidArgumentError(std::string(what) + ": '" + item + "' is not a number");
-    out.push_back(v);
-    start = end + 1;
-  }
-  return out;
+  return ParseNumberList(text, what);
 }
 
 absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& volume) {
@@ -80,7 +70,8 @@ absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& v
   ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> iso, ParseNumbers(args.iso, "--iso"));
   for (double v : iso) r.isovalues.push_back(float(v));
   if (args.budget != -1) {
-    if (args.budget <= 0) return absl::InvalidArgumentError("--budget must be a positive triangle count");
+    if (args.budget <= 0)
+      return absl::InvalidArgumentError("--budget must be a positive triangle count");
     r.budget = args.budget;
   } else if (args.eps < 0 || !std::isfinite(args.eps)) {
     return absl::InvalidArgumentError("give --eps E (>= 0, data units) or --budget N");

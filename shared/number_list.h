@@ -1,0 +1,15 @@
+// "x,y,z"-style command-line values, shared by the CLI, the viewer and the mesh renderer.
+#pragma once
+
+#include <string_view>
+#include <vector>
+
+#include "shared/status.h"
+
+namespace isostream {
+
+// Parses comma-separated finite numbers. InvalidArgument naming `what` and the bad item
+// ("--iso: 'abc' is not a number") for an empty item, trailing junk, NaN or Inf.
+absl::StatusOr<std::vector<double>> ParseNumberList(std::string_view text, std::string_view what);
+
+}  // namespace isostream
