@@ -77,6 +77,8 @@ absl::Status Session::Finish() {
   return FromGrpc(stream_->Finish());
 }
 
+void Session::TryCancel() { context_->TryCancel(); }
+
 void Session::Cancel() {
   context_->TryCancel();
   if (!finished_) {

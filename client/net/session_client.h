@@ -74,6 +74,9 @@ class Session {
   absl::Status Finish();
   // Drops the stream now (as a client that disappears would).
   void Cancel();
+  // Only asks gRPC to cancel: a Read blocked on another thread returns false. Safe to call while
+  // that thread reads (Cancel is not: it drains the stream itself); call Finish after joining it.
+  void TryCancel();
 
  private:
   friend class Client;

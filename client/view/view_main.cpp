@@ -20,6 +20,8 @@
 #include "client/render/headless_context.h"
 #include "client/render/image.h"
 #include "client/render/mesh_renderer.h"
+#include "client/view/view_request.h"
+#include "client/view/window_view.h"
 #include "shared/number_list.h"
 
 namespace isostream::view {
@@ -40,6 +42,7 @@ struct Args {
   std::string codec = "draco";
   int orbit = 0;
   bool window = false;
+  int exit_after_frames = 0;
   bool progressive = true;
 };
 
@@ -54,14 +57,6 @@ std::string NumberedPath(const std::string& path, int index) {
   const size_t slash = path.find_last_of('/');
   if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return path + suffix;
   return path.substr(0, dot) + suffix + path.substr(dot);
-}
-
-pb::Vec3 ToPb(const glm::vec3& v) {
-  pb::Vec3 out;
-  out.set_x(v.x);
-  out.set_y(v.y);
-  out.set_z(v.z);
-  return out;
 }
 
 // Receives one view's frame: chunks are uploaded as they arrive into the renderer's pending
@@ -138,14 +133,11 @@ int Run(const Args& args) {
       std::fprintf(stderr,
                    "isostream-view: --window needs a display, and neither DISPLAY nor "
                    "WAYLAND_DISPLAY is set; render headless with -o frame.png instead\n");
-    } else {
-      std::fprintf(stderr,
-                   "isostream-view: this build has no windowing backend (GLFW/X11 not linked); "
-                   "render headless with -o frame.png\n");
+      return 2;
     }
-    return 2;
+  } else if (args.output.empty()) {
+    return Fail(absl::InvalidArgumentError("give -o frame.png (or --window)"));
   }
-  if (args.output.empty()) return Fail(absl::InvalidArgumentError("give -o frame.png"));
   int width = 0, height = 0;
   char tail = 0;
   if (std::sscanf(args.size.c_str(), "%dx%d%c", &width, &height, &tail) != 2 || width < 1 ||
@@ -207,6 +199,16 @@ int Run(const Args& args) {
     camera.far_plane = distance + 1.1f * radius;
   }
 
+  ViewState state;
+  state.volume = args.volume;
+  state.isovalues = iso;
+  state.budget = args.budget;
+  // Not given: 0.2% of the value range. A given eps goes to the server as it is: the server
+  // validates it and says what is wrong.
+  state.eps = !std::isnan(args.eps) ? args.eps : 0.002 * (info->max_value() - info->min_value());
+  state.raw_codec = args.codec == "raw";
+  state.progressive = args.progressive;
+
   render::HeadlessContextOptions ctx_options;
   ctx_options.width = width;
   ctx_options.height = height;
@@ -217,6 +219,21 @@ int Run(const Args& args) {
   render::Palette palette = render::DefaultPalette();
   (*renderer)->SetPalette(palette);
 
+  if (args.window) {
+    WindowOptions window;
+    window.width = width;
+    window.height = height;
+    window.state = state;
+    window.camera = camera;
+    window.value_range = info->max_value() - info->min_value();
+    window.exit_after_frames = args.exit_after_frames;
+    window.screenshot = args.output;
+    renderer->reset();  // the window makes its own context and renderer
+    context->reset();
+    const absl::Status shown = RunWindow(**client, window);
+    return shown.ok() ? 0 : Fail(shown);
+  }
+
   auto session = (*client)->OpenSession();
   if (!session.ok()) return Fail(session.status());
   const std::vector<render::Camera> cameras = args.orbit > 0
@@ -224,31 +241,7 @@ int Run(const Args& args) {
                                                   : std::vector<render::Camera>{camera};
   for (size_t i = 0; i < cameras.size(); ++i) {
     const render::Camera& cam = cameras[i];
-    pb::ViewRequest view;
-    view.set_volume(args.volume);
-    view.set_request_id(i + 1);
-    *view.mutable_camera()->mutable_eye() = ToPb(cam.eye);
-    *view.mutable_camera()->mutable_target() = ToPb(cam.target);
-    *view.mutable_camera()->mutable_up() = ToPb(cam.up);
-    for (size_t s = 0; s < iso.size(); ++s) {
-      pb::Surface* surface = view.add_surfaces();
-      surface->set_isovalue(float(iso[s]));
-      const render::SurfaceStyle& style = palette[s % palette.size()];
-      surface->set_r(style.color.r);
-      surface->set_g(style.color.g);
-      surface->set_b(style.color.b);
-      surface->set_a(style.opacity);
-    }
-    if (args.budget != -1) {
-      view.set_triangle_budget(args.budget);
-    } else {
-      // Not given: 0.2% of the value range. Given values go to the server as they are: it
-      // validates them and says what is wrong.
-      view.set_eps(!std::isnan(args.eps) ? args.eps
-                                         : 0.002 * (info->max_value() - info->min_value()));
-    }
-    view.set_codec(args.codec == "raw" ? pb::RAW : pb::DRACO);
-    view.set_progressive(args.progressive);
+    const pb::ViewRequest view = MakeViewRequest(state, cam, palette, i + 1);
     const auto t0 = std::chrono::steady_clock::now();
     const absl::Status sent = (*session)->Send(view);
     if (!sent.ok()) return Fail(sent);
@@ -298,7 +291,11 @@ int main(int argc, char** argv) {
   app.add_option("--token", args.token, "bearer token");
   app.add_option("--codec", args.codec, "draco (default) or raw")
       ->check(CLI::IsMember({"draco", "raw"}));
-  app.add_flag("--window", args.window, "interactive window (needs a display)");
+  app.add_flag("--window", args.window,
+               "interactive window (needs a display): drag to orbit, wheel to zoom, +/- eps, "
+               "[ ] isovalues, R reset, Q quit");
+  app.add_option("--exit-after", args.exit_after_frames,
+                 "with --window: close after N refined frames, writing -o as a screenshot");
   CLI11_PARSE(app, argc, argv);
   return isostream::view::Run(args);
 }

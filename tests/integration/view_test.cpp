@@ -2,11 +2,11 @@
 // and the failures a thin client meets (server gone, wrong address, unknown volume, corrupt
 // chunk bytes) give a clear error and a non-zero exit.
 #include <gtest/gtest.h>
-
 #include <sys/wait.h>
 
 #include <array>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 
 #include "client/net/session_client.h"
@@ -21,8 +21,9 @@ struct ViewRun {
   std::string output;
 };
 
-ViewRun View(const std::string& args) {
-  const std::string cmd = std::string(ISOSTREAM_VIEW_PATH) + " " + args + " 2>&1";
+ViewRun View(const std::string& args, bool no_display = false) {
+  const std::string cmd = std::string(no_display ? "env -u DISPLAY -u WAYLAND_DISPLAY " : "") +
+                          ISOSTREAM_VIEW_PATH + " " + args + " 2>&1";
   ViewRun r{-1, ""};
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;
@@ -52,7 +53,8 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   const std::string png = dir.path() + "/bucky.png";
   const ViewRun ok = View("--server " + daemon.address() +
                           " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01 --eye 2.2,1.6,2.8"
-                          " --size 200x160 -o " + png);
+                          " --size 200x160 -o " +
+                          png);
   ASSERT_EQ(ok.code, 0) << ok.output;
   auto image = render::ReadPng(png);
   ASSERT_TRUE(image.ok()) << image.status();
@@ -61,9 +63,10 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   EXPECT_GT(Coverage(*image), 0.1) << "the surfaces should fill a good part of the picture";
 
   // An orbit asks the server for a new, newly ordered frame per view.
-  const ViewRun orbit = View("--server " + daemon.address() +
-                             " --volume sphere:33 --iso 0.3,0.6 --budget 5000 --orbit 3 --size 64x64 -o " +
-                             dir.path() + "/orbit.png");
+  const ViewRun orbit =
+      View("--server " + daemon.address() +
+           " --volume sphere:33 --iso 0.3,0.6 --budget 5000 --orbit 3 --size 64x64 -o " +
+           dir.path() + "/orbit.png");
   ASSERT_EQ(orbit.code, 0) << orbit.output;
   for (const char* name : {"orbit_000.png", "orbit_001.png", "orbit_002.png"})
     EXPECT_TRUE(render::ReadPng(dir.path() + "/" + name).ok()) << name;
@@ -72,8 +75,8 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   EXPECT_NE(unknown.code, 0);
   EXPECT_NE(unknown.output.find("nosuch:9"), std::string::npos) << unknown.output;
 
-  const ViewRun bad_eps = View("--server " + daemon.address() +
-                               " --volume sphere:17 --iso 0.5 --eps -3 -o " + png);
+  const ViewRun bad_eps =
+      View("--server " + daemon.address() + " --volume sphere:17 --iso 0.5 --eps -3 -o " + png);
   EXPECT_NE(bad_eps.code, 0);
   EXPECT_NE(bad_eps.output.find("eps"), std::string::npos) << bad_eps.output;
 
@@ -87,9 +90,37 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   EXPECT_NE(wrong.code, 0);
   EXPECT_NE(wrong.output.find("127.0.0.1:1"), std::string::npos) << wrong.output;
 
-  const ViewRun window = View("--server 127.0.0.1:1 --volume buckyball:65 --window");
+  const ViewRun window = View("--server 127.0.0.1:1 --volume buckyball:65 --window", true);
   EXPECT_NE(window.code, 0);
   EXPECT_NE(window.output.find("display"), std::string::npos) << window.output;
+}
+
+// --window under a virtual X server (xvfb-run, installed by scripts/install-deps.sh): the
+// window opens, shows the refined frame, and its screenshot has the surfaces in it.
+TEST(View, WindowModeShowsTheFrameUnderXvfb) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "xvfb-run is not installed (scripts/install-deps.sh installs it)";
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
+  const std::string png = dir.path() + "/window.png";
+  const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24' " +
+                          std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
+                          " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01 --eye 2.2,1.6,2.8"
+                          " --size 240x200 --window --exit-after 1 -o " +
+                          png + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string output;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) output.append(buf.data(), n);
+  const int status = pclose(p);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << output;
+  auto image = render::ReadPng(png);
+  ASSERT_TRUE(image.ok()) << image.status();
+  EXPECT_EQ(image->width, 240);
+  EXPECT_GT(Coverage(*image), 0.05);
 }
 
 TEST(View, CorruptChunkBytesAreAnErrorNotACrash) {

@@ -1,0 +1,253 @@
+#include "client/view/window_view.h"
+
+#ifndef GL_GLEXT_PROTOTYPES
+#define GL_GLEXT_PROTOTYPES 1
+#endif
+#define GLFW_INCLUDE_NONE
+#include <GL/glcorearb.h>
+#include <GLFW/glfw3.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <deque>
+#include <glm/geometric.hpp>
+#include <mutex>
+#include <thread>
+
+#include "client/render/image.h"
+
+namespace isostream::view {
+namespace {
+
+std::string g_glfw_error;  // GLFW reports errors through a callback, before any window exists
+
+// The orbit the mouse drives: the eye on a sphere around the target.
+struct Orbit {
+  glm::vec3 target{0.0f};
+  float distance = 1, yaw = 0, pitch = 0;
+
+  static Orbit From(const render::Camera& c) {
+    Orbit o;
+    o.target = c.target;
+    const glm::vec3 d = c.eye - c.target;
+    o.distance = glm::length(d);
+    o.yaw = std::atan2(d.x, d.z);
+    o.pitch = std::asin(std::clamp(d.y / o.distance, -1.0f, 1.0f));
+    return o;
+  }
+  glm::vec3 Eye() const {
+    return target + distance * glm::vec3(std::cos(pitch) * std::sin(yaw), std::sin(pitch),
+                                         std::cos(pitch) * std::cos(yaw));
+  }
+};
+
+struct Input {
+  Orbit orbit;
+  bool dragging = false;
+  double last_x = 0, last_y = 0;
+  bool changed = true;
+  int eps_steps = 0;  // +1: eps / 2
+  int iso_steps = 0;  // +1: isovalues + 1% of the range
+  bool reset = false;
+};
+
+// Chunks from the receiving thread to the GL thread (GL calls must stay on the window's).
+struct Inbox {
+  std::mutex mu;
+  std::deque<::isostream::v1::FrameChunk> chunks;
+  std::atomic<bool> ended{false};
+};
+
+absl::Status Screenshot(int width, int height, const std::string& path) {
+  render::Image image;
+  image.width = width;
+  image.height = height;
+  image.rgba.resize(size_t(width) * height * 4);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, image.rgba.data());
+  // GL rows run bottom to top; PNG rows top to bottom.
+  for (int y = 0; y < height / 2; ++y)
+    std::swap_ranges(image.rgba.begin() + size_t(y) * width * 4,
+                     image.rgba.begin() + size_t(y + 1) * width * 4,
+                     image.rgba.begin() + size_t(height - 1 - y) * width * 4);
+  return render::WritePng(image, path);
+}
+
+}  // namespace
+
+absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
+  glfwSetErrorCallback([](int, const char* message) { g_glfw_error = message; });
+  if (!glfwInit())
+    return absl::UnavailableError("cannot open a window (GLFW: " + g_glfw_error + ")");
+  struct Terminate {
+    ~Terminate() { glfwTerminate(); }
+  } terminate;
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
+  glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+  glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
+  // EGL, like the headless path: GLVND's libOpenGL then dispatches the renderer's calls.
+  glfwWindowHint(GLFW_CONTEXT_CREATION_API, GLFW_EGL_CONTEXT_API);
+  GLFWwindow* window =
+      glfwCreateWindow(options.width, options.height, "isostream-view", nullptr, nullptr);
+  if (!window)
+    return absl::UnavailableError("cannot open a GL 3.3 core window (GLFW: " + g_glfw_error + ")");
+  glfwMakeContextCurrent(window);
+  glfwSwapInterval(1);
+
+  auto renderer = render::MeshRenderer::Create();
+  if (!renderer.ok()) return renderer.status();
+  const render::Palette palette = render::DefaultPalette();
+  (*renderer)->SetPalette(palette);
+
+  Input input;
+  input.orbit = Orbit::From(options.camera);
+  glfwSetWindowUserPointer(window, &input);
+  glfwSetMouseButtonCallback(window, [](GLFWwindow* w, int button, int action, int) {
+    auto* in = static_cast<Input*>(glfwGetWindowUserPointer(w));
+    if (button != GLFW_MOUSE_BUTTON_LEFT) return;
+    in->dragging = action == GLFW_PRESS;
+    glfwGetCursorPos(w, &in->last_x, &in->last_y);
+  });
+  glfwSetCursorPosCallback(window, [](GLFWwindow* w, double x, double y) {
+    auto* in = static_cast<Input*>(glfwGetWindowUserPointer(w));
+    if (!in->dragging) return;
+    in->orbit.yaw -= float(x - in->last_x) * 0.01f;
+    in->orbit.pitch = std::clamp(in->orbit.pitch + float(y - in->last_y) * 0.01f, -1.5f, 1.5f);
+    in->last_x = x, in->last_y = y;
+    in->changed = true;
+  });
+  glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
+    auto* in = static_cast<Input*>(glfwGetWindowUserPointer(w));
+    in->orbit.distance *= std::pow(0.9f, float(dy));
+    in->changed = true;
+  });
+  glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
+    if (action == GLFW_RELEASE) return;
+    auto* in = static_cast<Input*>(glfwGetWindowUserPointer(w));
+    switch (key) {
+      case GLFW_KEY_EQUAL:
+      case GLFW_KEY_KP_ADD:
+        ++in->eps_steps;
+        break;
+      case GLFW_KEY_MINUS:
+      case GLFW_KEY_KP_SUBTRACT:
+        --in->eps_steps;
+        break;
+      case GLFW_KEY_RIGHT_BRACKET:
+        ++in->iso_steps;
+        break;
+      case GLFW_KEY_LEFT_BRACKET:
+        --in->iso_steps;
+        break;
+      case GLFW_KEY_R:
+        in->reset = true;
+        break;
+      case GLFW_KEY_Q:
+      case GLFW_KEY_ESCAPE:
+        glfwSetWindowShouldClose(w, GLFW_TRUE);
+        return;
+      default:
+        return;
+    }
+    in->changed = true;
+  });
+
+  auto session = client.OpenSession();
+  if (!session.ok()) return session.status();
+  Inbox inbox;
+  std::thread receiver([&] {
+    ::isostream::v1::FrameChunk chunk;
+    while ((*session)->Read(&chunk)) {
+      std::lock_guard<std::mutex> lock(inbox.mu);
+      inbox.chunks.push_back(std::move(chunk));
+    }
+    inbox.ended = true;
+  });
+
+  ViewState state = options.state;
+  uint64_t request_id = 0;
+  net::FrameAssembler assembler;
+  bool frame_open = false;
+  int refined_frames = 0;
+  absl::Status result;
+  render::Camera camera = options.camera;
+  char title[256];
+  while (!glfwWindowShouldClose(window)) {
+    glfwPollEvents();
+    if (input.changed) {
+      if (input.reset) {
+        input.orbit = Orbit::From(options.camera);
+        state = options.state;
+        input.reset = false;
+      }
+      for (; input.eps_steps > 0; --input.eps_steps) state.eps *= 0.5;
+      for (; input.eps_steps < 0; ++input.eps_steps) state.eps *= 2.0;
+      for (double& v : state.isovalues) v += 0.01 * options.value_range * input.iso_steps;
+      input.iso_steps = 0;
+      camera.eye = input.orbit.Eye();
+      camera.target = input.orbit.target;
+      result = (*session)->Send(MakeViewRequest(state, camera, palette, ++request_id));
+      if (!result.ok()) break;
+      input.changed = false;
+    }
+    {
+      std::lock_guard<std::mutex> lock(inbox.mu);
+      while (!inbox.chunks.empty() && result.ok()) {
+        ::isostream::v1::FrameChunk chunk = std::move(inbox.chunks.front());
+        inbox.chunks.pop_front();
+        if (chunk.frame_id() != request_id) continue;  // superseded by a newer view
+        const size_t before = assembler.frame().mesh.triangle_count();
+        const bool starts = chunk.chunk_index() == 0;
+        result = assembler.Add(chunk);
+        if (!result.ok()) break;
+        if (starts) {
+          (*renderer)->BeginFrame();
+          frame_open = true;
+        }
+        const net::Frame& f = assembler.frame();
+        if (frame_open && f.mesh.triangle_count() > before)
+          result = (*renderer)->AddChunk(f.mesh, before, f.mesh.triangle_count() - before);
+        if (result.ok() && assembler.complete()) {
+          result = (*renderer)->EndFrame();
+          frame_open = false;
+          if (!f.coarse) ++refined_frames;
+          std::snprintf(title, sizeof(title), "isostream-view  %s  eps %g  %lld triangles  %s",
+                        state.volume.c_str(), f.stats.eps_used(),
+                        (long long)f.mesh.triangle_count(), f.coarse ? "(coarse)" : "");
+          glfwSetWindowTitle(window, title);
+        }
+      }
+    }
+    if (!result.ok()) break;
+    if (inbox.ended && inbox.chunks.empty()) {
+      result = (*session)->Finish();
+      if (result.ok()) result = absl::UnavailableError("the server closed the session");
+      break;
+    }
+    int fb_width, fb_height;
+    glfwGetFramebufferSize(window, &fb_width, &fb_height);
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glViewport(0, 0, fb_width, fb_height);
+    camera.aspect = float(fb_width) / float(std::max(fb_height, 1));
+    result = (*renderer)->Render(camera);
+    if (!result.ok()) break;
+    if (options.exit_after_frames > 0 && refined_frames >= options.exit_after_frames) {
+      if (!options.screenshot.empty()) result = Screenshot(fb_width, fb_height, options.screenshot);
+      break;
+    }
+    glfwSwapBuffers(window);
+  }
+  // The receiver may be blocked in Read: cancel, let it return, then finish the call here.
+  (*session)->TryCancel();
+  receiver.join();
+  if (!inbox.ended || result.ok()) (*session)->Finish().IgnoreError();
+  renderer->reset();
+  glfwDestroyWindow(window);
+  return result;
+}
+
+}  // namespace isostream::view
