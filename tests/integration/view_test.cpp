@@ -2,37 +2,23 @@
 // and the failures a thin client meets (server gone, wrong address, unknown volume, corrupt
 // chunk bytes) give a clear error and a non-zero exit.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
-#include <array>
-#include <cstdio>
 #include <cstdlib>
 #include <string>
 
 #include "client/net/session_client.h"
 #include "client/render/image.h"
 #include "daemon_process.h"
+#include "tests/common/run_command.h"
 
 namespace isostream {
 namespace {
 
-struct ViewRun {
-  int code;
-  std::string output;
-};
+using ViewRun = testing::CommandResult;
 
 ViewRun View(const std::string& args, bool no_display = false) {
-  const std::string cmd = std::string(no_display ? "env -u DISPLAY -u WAYLAND_DISPLAY " : "") +
-                          ISOSTREAM_VIEW_PATH + " " + args + " 2>&1";
-  ViewRun r{-1, ""};
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return testing::RunCommand(std::string(no_display ? "env -u DISPLAY -u WAYLAND_DISPLAY " : "") +
+                             ISOSTREAM_VIEW_PATH + " " + args);
 }
 
 // Fraction of pixels that are not the (white) background.
@@ -108,15 +94,9 @@ TEST(View, WindowModeShowsTheFrameUnderXvfb) {
                           std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
                           " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01 --eye 2.2,1.6,2.8"
                           " --size 240x200 --window --exit-after 1 -o " +
-                          png + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  ASSERT_NE(p, nullptr);
-  std::string output;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) output.append(buf.data(), n);
-  const int status = pclose(p);
-  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << output;
+                          png;
+  const testing::CommandResult run = testing::RunCommand(cmd);
+  ASSERT_EQ(run.code, 0) << run.output;
   auto image = render::ReadPng(png);
   ASSERT_TRUE(image.ok()) << image.status();
   EXPECT_EQ(image->width, 240);

@@ -1,36 +1,21 @@
 // The `isostream` command line end to end: a real process, real files, exit codes and messages.
 #include <gtest/gtest.h>
 
-#include <sys/wait.h>
-
-#include <array>
-#include <cstdio>
 #include <filesystem>
 #include <string>
 
 #include "server/extract/extractor.h"
 #include "server/hierarchy/prepared_volume.h"
 #include "shared/ply_io.h"
+#include "tests/common/run_command.h"
 
 namespace isostream {
 namespace {
 
-struct CliRun {
-  int code;
-  std::string output;  // stdout and stderr
-};
+using CliRun = testing::CommandResult;
 
 CliRun Cli(const std::string& args) {
-  const std::string cmd = std::string(ISOSTREAM_CLI) + " " + args + " 2>&1";
-  CliRun r{-1, ""};
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return testing::RunCommand(std::string(ISOSTREAM_CLI) + " " + args);
 }
 
 std::string TempPath(const std::string& name) {
@@ -39,8 +24,10 @@ std::string TempPath(const std::string& name) {
 
 TEST(Cli, ExtractWritesThePlyOfTheDirectExtractionInOrder) {
   const std::string out = TempPath("cli-bucky.ply");
-  const CliRun r = Cli("extract --volume buckyball:33 --iso 0.05,0.15,0.25 --eps 0.002 --eye 2,1.5,2.5 "
-                    "--no-cache -o " + out + " --stats");
+  const CliRun r =
+      Cli("extract --volume buckyball:33 --iso 0.05,0.15,0.25 --eps 0.002 --eye 2,1.5,2.5 "
+          "--no-cache -o " +
+          out + " --stats");
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("tets visited"), std::string::npos) << r.output;
   auto ply = ReadPly(out);
@@ -70,7 +57,8 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
       {"extract --volume sphere:17 --iso 0.5 --budget 0 -o " + out, "--budget"},
       {"extract --volume sphere:17 --iso 0.5 --eps -1 -o " + out, "--eps"},
       {"extract --volume sphere:17 --iso 0.5 -o " + out, "--eps"},
-      {"extract --volume sphere:17 --iso 1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17 --eps 0 -o " + out,
+      {"extract --volume sphere:17 --iso 1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17 --eps 0 -o " +
+           out,
        "16"},
       {"extract --volume sphere:17 --iso abc --eps 0 -o " + out, "abc"},
       {"extract --volume sphere:17 --iso 0.5 --eps 0 --view-dir 0,0,0 -o " + out, "direction"},
