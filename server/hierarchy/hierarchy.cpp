@@ -220,9 +220,8 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
   auto h = std::make_shared<Hierarchy>();
   h->k_ = samples.k;
   h->n_ = samples.n;
-  h->nb_ = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
   h->data_dims_ = samples.data_dims;
-  const size_t nb = h->nb_;
+  const size_t nb = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;  // bricks per axis
   constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
   for (int a = 0; a < 3; ++a) {
     const size_t brick_stride = a == 0 ? 1 : a == 1 ? nb : nb * nb;

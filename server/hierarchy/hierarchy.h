@@ -76,7 +76,6 @@ class Hierarchy {
   // axis_offsets()[a][c]: the index contribution of coordinate c on axis a.
   const std::array<std::vector<uint32_t>, 3>& axis_offsets() const { return axis_offset_; }
   const HierarchyBrick* bricks() const { return bricks_.data(); }
-  size_t bricks_per_axis() const { return nb_; }
   float sample_at(size_t i) const { return bricks_[i >> 9].value[i & 511]; }
   float eta_at(size_t i) const { return DecodeEta(bricks_[i >> 9].eta[i & 511]); }
   float sample(int x, int y, int z) const { return sample_at(index(x, y, z)); }
@@ -98,7 +97,6 @@ class Hierarchy {
 
   int k_ = 0;
   int n_ = 0;
-  size_t nb_ = 0;  // bricks per axis
   std::array<int, 3> data_dims_{0, 0, 0};
   UninitializedVector<HierarchyBrick> bricks_;
   std::array<std::vector<uint32_t>, 3> axis_offset_;
