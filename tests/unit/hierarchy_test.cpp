@@ -14,6 +14,7 @@
 #include <tuple>
 
 #include "server/hierarchy/refinement_vertex.h"
+#include "test_volumes.h"
 #include "tree_walk.h"
 
 namespace isostream {
@@ -23,20 +24,7 @@ using testing::AdaptiveLeaves;
 using testing::TetNode;
 using testing::WalkTree;
 
-PaddedSamples MakeSamples(int k, const std::function<float(double, double, double)>& f) {
-  PaddedSamples s;
-  s.k = k;
-  s.n = (1 << k) + 1;
-  s.data_dims = {s.n, s.n, s.n};
-  s.values.resize(static_cast<size_t>(s.n) * s.n * s.n);
-  for (int z = 0; z < s.n; ++z)
-    for (int y = 0; y < s.n; ++y)
-      for (int x = 0; x < s.n; ++x) {
-        const double c = 2.0 / (s.n - 1);
-        s.values[(static_cast<size_t>(z) * s.n + y) * s.n + x] = f(x * c - 1, y * c - 1, z * c - 1);
-      }
-  return s;
-}
+using testing::MakeSamples;
 
 struct Volume {
   const char* name;
