@@ -4,11 +4,8 @@
 
 in vec3 v_position;
 in vec3 v_normal;
+flat in uint v_surface;
 
-// One byte per triangle of the chunk being drawn, indexed by gl_PrimitiveID (which counts
-// from 0 in each draw call): the mesh stores surfaces per triangle, and this avoids splitting
-// shared vertices into per-surface copies.
-uniform usamplerBuffer u_triangle_surface;
 uniform vec4 u_surface_style[16];  // rgb colour, opacity
 
 uniform vec3 u_eye;
@@ -20,8 +17,7 @@ uniform vec4 u_light_terms;   // ambient, diffuse, specular, shininess
 out vec4 frag_color;
 
 void main() {
-  uint surface = texelFetch(u_triangle_surface, gl_PrimitiveID).r;
-  vec4 style = u_surface_style[min(surface, 15u)];
+  vec4 style = u_surface_style[min(v_surface, 15u)];
 
   vec3 v = u_orthographic ? -u_forward : normalize(u_eye - v_position);
   vec3 n = v_normal;

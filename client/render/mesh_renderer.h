@@ -80,8 +80,9 @@ class MeshRenderer {
   // triangles within a chunk in index order. The mesh is copied, the caller keeps it.
   // FailedPrecondition outside BeginFrame/EndFrame; InvalidArgument when the mesh fails
   // ValidateMeshSizes / ValidateTriangleRange (bad sizes, index out of range, surface >= 16) or
-  // has more triangles than this GL can address in one chunk; Internal for GL errors. A chunk
-  // with no triangles is accepted and adds nothing.
+  // has more triangles than one draw call takes (~715 M); Internal for GL errors. A chunk with
+  // no triangles is accepted and adds nothing. Vertices shared by triangles of different
+  // surfaces are uploaded once per surface (the extractor never shares them).
   absl::Status AddChunk(const OrderedMesh& mesh);
 
   // As AddChunk(mesh) for triangles [first_triangle, first_triangle + triangle_count) only;

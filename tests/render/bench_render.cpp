@@ -2,6 +2,9 @@
 // painter's order) and draw it blended at 1024x768, as chunks the way frames arrive, and draw
 // an already uploaded frame. Figure: ms_per_Mtri, wall time per iteration per 10^6 triangles.
 //   cmake --build build --target bench_render && build/client/bench_render
+// Measured (Debian 12, Mesa 22.3.6 llvmpipe, 2 cores, median of 5): upload + draw 117-123 ms per
+// 10^6 triangles (upload alone ~5), redraw 115, redraw covering ~1% of the pixels 73: the
+// per-triangle vertex stage, not blending, is most of the cost.
 #include <benchmark/benchmark.h>
 
 #include <chrono>

@@ -1,6 +1,14 @@
-// MeshRenderer on OpenGL 3.3 core. Each chunk keeps its own vertex array, index buffer and a
-// buffer texture of per-triangle surface indices; drawing a frame is one glDrawElements per
-// chunk, in arrival order, blended over what is already there.
+// MeshRenderer on OpenGL 3.3 core. Each chunk keeps its own vertex array and index buffer;
+// drawing a frame is one glDrawElements per chunk, in arrival order, blended over what is
+// already there.
+//
+// Surfaces are per triangle in OrderedMesh but reach the shaders as a flat per-vertex
+// attribute. Reading gl_PrimitiveID in the fragment shader (with the per-triangle bytes in a
+// buffer texture) would avoid touching vertices, but on llvmpipe it sends every primitive through
+// Mesa's primitive assembler and cost ~45 ms per 10^6 triangles (125 ms vs 79 ms for a frame
+// that covers few pixels). Extracted isosurfaces never share a vertex between surfaces, so the
+// attribute is usually free; a vertex that is shared is split, one copy per surface.
+#include <absl/container/flat_hash_map.h>
 #include <absl/strings/str_cat.h>
 
 #include <algorithm>
@@ -20,22 +28,20 @@ namespace {
 
 constexpr GLuint kPositionAttribute = 0;
 constexpr GLuint kNormalAttribute = 1;
-constexpr GLint kSurfaceTextureUnit = 0;
+constexpr GLuint kSurfaceAttribute = 2;
 
 struct Chunk {
   gl::VertexArray vertex_array;
   gl::Buffer positions;
   gl::Buffer normals;
-  gl::Buffer indices;
   gl::Buffer surfaces;
-  gl::Texture surface_texture;
+  gl::Buffer indices;
   GLsizei index_count = 0;
   bool has_normals = false;
 };
 
 struct Uniforms {
   GLint view_projection = -1;
-  GLint triangle_surface = -1;
   GLint surface_style = -1;
   GLint eye = -1;
   GLint forward = -1;
@@ -44,16 +50,19 @@ struct Uniforms {
   GLint light_terms = -1;
 };
 
-// Arrays for one chunk in the layout the GPU gets; views into the caller's mesh when the whole
-// mesh is uploaded, into the renderer's scratch when a range is compacted.
+// Arrays for one chunk; views into the caller's mesh when the whole mesh is uploaded, into the
+// renderer's scratch when a range is compacted or vertices are split.
 struct ChunkArrays {
   const float* positions;
   const float* normals;  // null when the mesh has no normals
   size_t vertex_count;
   const uint32_t* triangles;
-  const uint8_t* surface;
+  const uint8_t* surface;  // per triangle
   size_t triangle_count;
 };
+
+// Largest chunk one glDrawElements call can draw: its index count is a GLsizei.
+constexpr size_t kMaxChunkTriangles = size_t(std::numeric_limits<GLsizei>::max()) / 3;
 
 }  // namespace
 
@@ -90,7 +99,6 @@ glm::vec3 LightDirectionInWorld(const Lighting& lighting, const Camera& camera) 
 struct MeshRenderer::Impl {
   gl::Program program;
   Uniforms uniforms;
-  GLint max_chunk_triangles = 0;
 
   std::vector<Chunk> current;
   std::vector<Chunk> pending;
@@ -102,28 +110,79 @@ struct MeshRenderer::Impl {
   Lighting lighting;
   glm::vec4 background = kDefaultBackground;
 
-  // Scratch for range uploads, kept between calls so a stream of chunks does not allocate per
-  // chunk once the largest has been seen. remap holds kUnused for every vertex between calls.
+  // Scratch kept between calls so a stream of chunks does not allocate per chunk once the
+  // largest has been seen. remap holds kUnused for every vertex between calls.
   static constexpr uint32_t kUnused = std::numeric_limits<uint32_t>::max();
+  static constexpr uint8_t kNoSurface = 0xFF;
   std::vector<uint32_t> remap;
   std::vector<uint32_t> used_vertices;
   std::vector<float> scratch_positions;
   std::vector<float> scratch_normals;
   std::vector<uint32_t> scratch_triangles;
+  std::vector<uint8_t> vertex_surface;
+  std::vector<float> split_positions;
+  std::vector<float> split_normals;
+  std::vector<uint32_t> split_triangles;
 
-  absl::Status Upload(const ChunkArrays& a) {
-    if (a.triangle_count > size_t(max_chunk_triangles)) {
-      return absl::InvalidArgumentError(absl::StrCat("chunk has ", a.triangle_count,
-                                                     " triangles; this OpenGL addresses at most ",
-                                                     max_chunk_triangles, " per chunk, split it"));
+  // Gives every vertex the surface of the triangles that use it, in vertex_surface. Returns
+  // `a` itself when no vertex serves two surfaces; otherwise arrays (in the split_* scratch)
+  // where each (vertex, surface) pair in use is its own vertex. Unused vertices get surface 0.
+  ChunkArrays AssignVertexSurfaces(const ChunkArrays& a) {
+    vertex_surface.assign(a.vertex_count, kNoSurface);
+    bool shared = false;
+    for (size_t t = 0; t < a.triangle_count && !shared; ++t) {
+      for (int k = 0; k < 3; ++k) {
+        uint8_t& s = vertex_surface[a.triangles[3 * t + k]];
+        if (s == kNoSurface) s = a.surface[t];
+        shared |= s != a.surface[t];
+      }
     }
-    if (a.triangle_count == 0) return absl::OkStatus();
+    if (!shared) {
+      for (uint8_t& s : vertex_surface) s = s == kNoSurface ? 0 : s;
+      return a;
+    }
+    // Rare: only meshes not made by the extractor get here, so a hash map is good enough.
+    absl::flat_hash_map<uint64_t, uint32_t> copy_of;
+    split_positions.clear();
+    split_normals.clear();
+    vertex_surface.clear();
+    split_triangles.resize(3 * a.triangle_count);
+    for (size_t t = 0; t < a.triangle_count; ++t) {
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t v = a.triangles[3 * t + k];
+        const auto [it, inserted] =
+            copy_of.try_emplace(uint64_t(v) << 8 | a.surface[t], uint32_t(vertex_surface.size()));
+        if (inserted) {
+          split_positions.insert(split_positions.end(), a.positions + 3 * v,
+                                 a.positions + 3 * v + 3);
+          if (a.normals != nullptr)
+            split_normals.insert(split_normals.end(), a.normals + 3 * v, a.normals + 3 * v + 3);
+          vertex_surface.push_back(a.surface[t]);
+        }
+        split_triangles[3 * t + k] = it->second;
+      }
+    }
+    return {split_positions.data(),
+            a.normals != nullptr ? split_normals.data() : nullptr,
+            vertex_surface.size(),
+            split_triangles.data(),
+            a.surface,
+            a.triangle_count};
+  }
+
+  absl::Status Upload(const ChunkArrays& input) {
+    if (input.triangle_count > kMaxChunkTriangles) {
+      return absl::InvalidArgumentError(absl::StrCat("chunk has ", input.triangle_count,
+                                                     " triangles; one draw call takes at most ",
+                                                     kMaxChunkTriangles, ", split it"));
+    }
+    if (input.triangle_count == 0) return absl::OkStatus();
+    const ChunkArrays a = AssignVertexSurfaces(input);
     Chunk c;
     c.vertex_array = gl::VertexArray::Make();
     c.positions = gl::Buffer::Make();
-    c.indices = gl::Buffer::Make();
     c.surfaces = gl::Buffer::Make();
-    c.surface_texture = gl::Texture::Make();
+    c.indices = gl::Buffer::Make();
     c.index_count = GLsizei(3 * a.triangle_count);
     c.has_normals = a.normals != nullptr;
 
@@ -143,18 +202,16 @@ struct MeshRenderer::Impl {
     } else {
       glDisableVertexAttribArray(kNormalAttribute);
     }
+    glBindBuffer(GL_ARRAY_BUFFER, c.surfaces.get());
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(a.vertex_count), vertex_surface.data(),
+                 GL_STATIC_DRAW);
+    glEnableVertexAttribArray(kSurfaceAttribute);
+    glVertexAttribIPointer(kSurfaceAttribute, 1, GL_UNSIGNED_BYTE, 0, nullptr);
     glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, c.indices.get());
     glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(sizeof(uint32_t) * 3 * a.triangle_count),
                  a.triangles, GL_STATIC_DRAW);
     glBindVertexArray(0);
     glBindBuffer(GL_ARRAY_BUFFER, 0);
-
-    glBindBuffer(GL_TEXTURE_BUFFER, c.surfaces.get());
-    glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(a.triangle_count), a.surface, GL_STATIC_DRAW);
-    glBindTexture(GL_TEXTURE_BUFFER, c.surface_texture.get());
-    glTexBuffer(GL_TEXTURE_BUFFER, GL_R8UI, c.surfaces.get());
-    glBindTexture(GL_TEXTURE_BUFFER, 0);
-    glBindBuffer(GL_TEXTURE_BUFFER, 0);
 
     ISOSTREAM_RETURN_IF_ERROR(gl::CheckGl("MeshRenderer::AddChunk"));
     pending.push_back(std::move(c));
@@ -208,7 +265,6 @@ absl::StatusOr<std::unique_ptr<MeshRenderer>> MeshRenderer::Create() {
   const GLuint p = impl->program.get();
   Uniforms& u = impl->uniforms;
   u.view_projection = glGetUniformLocation(p, "u_view_projection");
-  u.triangle_surface = glGetUniformLocation(p, "u_triangle_surface");
   u.surface_style = glGetUniformLocation(p, "u_surface_style");
   u.eye = glGetUniformLocation(p, "u_eye");
   u.forward = glGetUniformLocation(p, "u_forward");
@@ -216,11 +272,10 @@ absl::StatusOr<std::unique_ptr<MeshRenderer>> MeshRenderer::Create() {
   u.light = glGetUniformLocation(p, "u_light");
   u.light_terms = glGetUniformLocation(p, "u_light_terms");
   // Every uniform is used by the shaders; a -1 here means the sources and this file disagree.
-  for (GLint location : {u.view_projection, u.triangle_surface, u.surface_style, u.eye, u.forward,
-                         u.orthographic, u.light, u.light_terms}) {
+  for (GLint location : {u.view_projection, u.surface_style, u.eye, u.forward, u.orthographic,
+                         u.light, u.light_terms}) {
     if (location < 0) return absl::InternalError("mesh shader lacks a uniform the renderer sets");
   }
-  glGetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &impl->max_chunk_triangles);
   ISOSTREAM_RETURN_IF_ERROR(gl::CheckGl("MeshRenderer::Create"));
   return std::unique_ptr<MeshRenderer>(new MeshRenderer(std::move(impl)));
 }
@@ -280,7 +335,6 @@ absl::Status MeshRenderer::Render(const Camera& camera) {
   glUseProgram(m.program.get());
   glUniformMatrix4fv(m.uniforms.view_projection, 1, GL_FALSE,
                      glm::value_ptr(camera.ViewProjection()));
-  glUniform1i(m.uniforms.triangle_surface, kSurfaceTextureUnit);
   GLfloat styles[4 * kMaxSurfaces];
   for (int s = 0; s < kMaxSurfaces; ++s) {
     const SurfaceStyle& style = m.palette[size_t(s)];
@@ -300,16 +354,13 @@ absl::Status MeshRenderer::Render(const Camera& camera) {
   glUniform4f(m.uniforms.light_terms, m.lighting.ambient, m.lighting.diffuse, m.lighting.specular,
               std::max(m.lighting.shininess, 1e-3f));
 
-  glActiveTexture(GL_TEXTURE0 + kSurfaceTextureUnit);
   for (const Chunk& c : m.current) {
     glBindVertexArray(c.vertex_array.get());
     // A disabled attribute array reads the context's current value, not the VAO's.
     if (!c.has_normals) glVertexAttrib3f(kNormalAttribute, 0.0f, 0.0f, 0.0f);
-    glBindTexture(GL_TEXTURE_BUFFER, c.surface_texture.get());
     glDrawElements(GL_TRIANGLES, c.index_count, GL_UNSIGNED_INT, nullptr);
   }
   glBindVertexArray(0);
-  glBindTexture(GL_TEXTURE_BUFFER, 0);
   glUseProgram(0);
   return gl::CheckGl("MeshRenderer::Render");
 }
