@@ -85,7 +85,14 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.dir = r.view.direction / xf.spacing;
   c.normals = r.normals;
   c.xf = xf;
+  c.inv_spacing = glm::vec3(1.0 / xf.spacing);
   c.tables = &ReferenceTets::Get();
+  c.cases = &MarchingTets::Get();
+  for (int i = 0; i < kNumTetClasses; ++i) {
+    const auto& v = (*c.tables)[TetClass{uint8_t(i)}].vertex;
+    const glm::dmat3 e(glm::dvec3(v[1] - v[0]), glm::dvec3(v[2] - v[0]), glm::dvec3(v[3] - v[0]));
+    c.negative[i] = glm::determinant(e) < 0;
+  }
   for (int level = 0; level <= 3 * c.k; ++level)
     c.inv_unit[level] = 2.0 / double((1 << c.k) >> (level / 3));
   return c;
@@ -129,7 +136,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
         continue;
       }
       Node kids[2];
-      extract_internal::Bisect(c, t, kids);
+      extract_internal::Bisect(c, t, &kids[0], &kids[1]);
       next.push_back(kids[0]);
       next.push_back(kids[1]);
       refined = true;
@@ -249,42 +256,40 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
 
   auto append = [&](SubtreeMesh& part) {
     const auto tj = std::chrono::steady_clock::now();
-    const OrderedMesh& p = part.mesh;
-    to_global.assign(p.vertex_count(), 0);
-    std::vector<char>& shared = part.shared_scratch;
-    shared.assign(p.vertex_count(), 0);
+    const size_t part_vertices = part.vertex_count();
+    // A boundary vertex already appended by an earlier part (in draw order) is reused and the
+    // part's own copy dropped; the others are copied and get compacted indices.
+    constexpr uint32_t kUnset = 0xffffffffu;
+    to_global.assign(part_vertices, kUnset);
+    size_t reused = 0;
     for (const auto& [local, key] : part.boundary) {
-      auto [it, inserted] = boundary_ids.emplace(key, 0);
-      if (!inserted) {
-        to_global[local] = it->second;
-        shared[local] = 1;
-      } else {
-        it->second = uint32_t(m.vertex_count() + local);  // fixed up below
-        shared[local] = 2;
-      }
+      auto it = boundary_ids.find(key);
+      if (it != boundary_ids.end()) to_global[local] = it->second, ++reused;
     }
-    // Copy the vertices this part owns; boundary ids issued above are corrected to the
-    // compacted positions.
-    size_t owned = 0;
-    for (char mark : shared) owned += mark != 1;
     size_t out = m.vertex_count();
-    m.positions.resize(3 * (out + owned));
-    m.normals.resize(3 * (out + owned));
-    for (size_t v = 0; v < p.vertex_count(); ++v) {
-      if (shared[v] == 1) continue;
-      to_global[v] = uint32_t(out);
-      std::copy_n(&p.positions[3 * v], 3, &m.positions[3 * out]);
-      std::copy_n(&p.normals[3 * v], 3, &m.normals[3 * out]);
-      ++out;
+    m.positions.resize(3 * (out + part_vertices - reused));
+    m.normals.resize(3 * (out + part_vertices - reused));
+    const float* pos = part.positions.data();
+    const float* nrm = part.normals.data();
+    float* mpos = m.positions.data();
+    float* mnrm = m.normals.data();
+    for (size_t v = 0; v < part_vertices; ++v) {
+      if (to_global[v] != kUnset) continue;
+      for (int i = 0; i < 3; ++i) {
+        mpos[3 * out + i] = pos[3 * v + i];
+        mnrm[3 * out + i] = nrm[3 * v + i];
+      }
+      to_global[v] = uint32_t(out++);
     }
-    for (const auto& [local, key] : part.boundary)
-      if (shared[local] == 2) boundary_ids[key] = to_global[local];
+    for (const auto& [local, key] : part.boundary) boundary_ids.emplace(key, to_global[local]);
     const size_t first = m.triangle_count();
     const size_t tri_base = m.triangles.size();
-    m.triangles.resize(tri_base + p.triangles.size());
+    m.triangles.resize(tri_base + part.triangles.size());
     uint32_t* tri = m.triangles.data() + tri_base;
-    for (size_t j = 0; j < p.triangles.size(); ++j) tri[j] = to_global[p.triangles[j]];
-    m.surface.insert(m.surface.end(), p.surface.begin(), p.surface.end());
+    const uint32_t* local_tri = part.triangles.data();
+    for (size_t j = 0; j < part.triangles.size(); ++j) tri[j] = to_global[local_tri[j]];
+    m.surface.insert(m.surface.end(), part.surface.data(),
+                     part.surface.data() + part.surface.size());
     st.tets_visited += part.visited;
     st.leaves += part.leaves;
     part.release();

@@ -20,8 +20,10 @@
 #include <glm/vec3.hpp>
 #include <vector>
 
+#include "server/extract/append_buffer.h"
 #include "server/extract/edge_vertex_table.h"
 #include "server/extract/extract_request.h"
+#include "server/extract/marching_tets.h"
 #include "server/hierarchy/bisection.h"
 #include "server/hierarchy/hierarchy.h"
 
@@ -52,7 +54,10 @@ struct Context {
   glm::dvec3 eye{0.0}, dir{0.0};  // grid space
   NormalMode normals = NormalMode::kSmooth;
   GridToWorld xf;
+  glm::vec3 inv_spacing{1.0f};  // grid-space gradient -> world-space gradient
   const ReferenceTets* tables = nullptr;
+  const MarchingTets* cases = nullptr;
+  uint8_t negative[kNumTetClasses];  // 1: the class's canonical vertex order is left-handed
   // 1 / (real length of one normalised class unit) per level: half the level's cube cell.
   double inv_unit[3 * 16 + 1];
 
@@ -80,7 +85,8 @@ inline void IsoRange(const Context& c, float lo, float hi, int* first, int* last
   *last = b;
 }
 
-inline Decision Decide(const Context& c, const Node& t) {
+// For a leaf, [*first, *last) are the sorted isovalues that cross it.
+inline Decision Decide(const Context& c, const Node& t, int* first, int* last) {
   if (c.clip) {
     for (int a = 0; a < 3; ++a) {
       const int lo = std::min(std::min(t.v[0][a], t.v[1][a]), std::min(t.v[2][a], t.v[3][a]));
@@ -89,10 +95,9 @@ inline Decision Decide(const Context& c, const Node& t) {
   }
   const float fmin = std::min(std::min(t.f[0], t.f[1]), std::min(t.f[2], t.f[3]));
   const float fmax = std::max(std::max(t.f[0], t.f[1]), std::max(t.f[2], t.f[3]));
-  int first, last;
   if (t.level == 3 * c.k) {
-    IsoRange(c, fmin, fmax, &first, &last);  // exact: a crossing needs fmin < iso <= fmax
-    return first < last ? Decision::kLeaf : Decision::kCull;
+    IsoRange(c, fmin, fmax, first, last);  // exact: a crossing needs fmin < iso <= fmax
+    return *first < *last ? Decision::kLeaf : Decision::kCull;
   }
   const float e = c.Eta(t.xref);
   // Any iso in [fmin - e, fmax + e] may meet f_full inside T.
@@ -100,16 +105,22 @@ inline Decision Decide(const Context& c, const Node& t) {
   while (a < c.iso_count && c.iso[a] < fmin - e) ++a;
   if (a == c.iso_count || c.iso[a] > fmax + e) return Decision::kCull;
   if (e >= c.eps) return Decision::kRefine;
-  IsoRange(c, fmin, fmax, &first, &last);
-  return first < last ? Decision::kLeaf : Decision::kCull;
+  IsoRange(c, fmin, fmax, first, last);
+  return *first < *last ? Decision::kLeaf : Decision::kCull;
 }
 
-// Children of t in draw order (first to draw in out[0]).
-inline void Bisect(const Context& c, const Node& t, Node out[2]) {
+inline Decision Decide(const Context& c, const Node& t) {
+  int first, last;
+  return Decide(c, t, &first, &last);
+}
+
+// The children of t in draw order: the farther one (drawn first) in *first.
+inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
   const glm::ivec3 x = RefinementPoint(t.v);
   const float fx = c.F(t.xref);
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
+  const glm::ivec3 points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
   const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
   bool child0_first = true;
   if (c.ordered) {
@@ -118,9 +129,12 @@ inline void Bisect(const Context& c, const Node& t, Node out[2]) {
     child0_first = side <= 0;  // eye on child 1's side: child 0 is farther
   }
   for (int ch = 0; ch < 2; ++ch) {
-    Node& o = out[child0_first ? ch : 1 - ch];
-    ChildVertices(rt, t.v, ch, &o.v);
-    for (int i = 0; i < 4; ++i) o.f[i] = fp[rt.child_point[ch][i]];
+    Node& o = *((ch == 0) == child0_first ? first : second);
+    const uint8_t* cp = rt.child_point[ch].data();
+    for (int i = 0; i < 4; ++i) {
+      o.v[i] = points[cp[i]];
+      o.f[i] = fp[cp[i]];
+    }
     o.g = t.g + w * rt.gradient_update[ch];
     o.cls = rt.child[ch];
     o.level = t.level + 1;
@@ -136,22 +150,28 @@ inline void Bisect(const Context& c, const Node& t, Node out[2]) {
 // Output of one subtree: a mesh with local vertex indices, plus the vertices that lie on the
 // subtree root's faces (they may be shared with a neighbouring subtree and are merged later).
 struct SubtreeMesh {
-  OrderedMesh mesh;
+  AppendBuffer<float> positions;  // 3 per vertex
+  AppendBuffer<float> normals;    // 3 per vertex
+  AppendBuffer<uint32_t> triangles;
+  AppendBuffer<uint8_t> surface;
   std::vector<std::pair<uint32_t, uint64_t>> boundary;  // (local vertex, edge key)
   int64_t visited = 0;
   int64_t leaves = 0;
-  std::vector<char> shared_scratch;  // used while appending this part
-  void release() {                   // appended: give the memory back before the frame ends
-    mesh = OrderedMesh();
+  size_t vertex_count() const { return positions.size() / 3; }
+  size_t triangle_count() const { return surface.size(); }
+  void release() {  // appended: give the memory back before the frame ends
+    positions.release();
+    normals.release();
+    triangles.release();
+    surface.release();
     boundary = {};
-    shared_scratch = {};
   }
 };
 
 // Integer planes of a subtree root's faces, to recognise edges that lie on them.
 struct RootFaces {
   glm::i64vec3 normal[4];
-  int64_t offset[4];
+  int64_t offset2[4];  // twice the plane offset: tested against doubled midpoints
   static int64_t Dot(const glm::i64vec3& a, const glm::i64vec3& b) {
     return a.x * b.x + a.y * b.y + a.z * b.z;
   }
@@ -160,17 +180,30 @@ struct RootFaces {
       const glm::i64vec3 a(v[(i + 1) % 4]), b(v[(i + 2) % 4]), c(v[(i + 3) % 4]);
       const glm::i64vec3 u = b - a, w = c - a;
       normal[i] = {u.y * w.z - u.z * w.y, u.z * w.x - u.x * w.z, u.x * w.y - u.y * w.x};
-      offset[i] = Dot(normal[i], a);
+      offset2[i] = 2 * Dot(normal[i], a);
     }
   }
-  bool EdgeOnFace(const glm::ivec3& p, const glm::ivec3& q) const {
+  // `doubled_mid` = a + b for an edge (a, b) inside the root. The root is convex, so the
+  // edge's midpoint lies on a face plane only if both ends do.
+  bool EdgeOnFace(const glm::ivec3& doubled_mid) const {
+    const glm::i64vec3 m(doubled_mid);
     for (int i = 0; i < 4; ++i)
-      if (Dot(normal[i], glm::i64vec3(p)) == offset[i] &&
-          Dot(normal[i], glm::i64vec3(q)) == offset[i])
-        return true;
+      if (Dot(normal[i], m) == offset2[i]) return true;
     return false;
   }
 };
+
+// Key of (edge, surface): the edge's doubled midpoint, its direction up to sign and its scale.
+// Edges of the hierarchy run along 13 directions with power-of-two lengths. Symmetric in the
+// endpoints, and computed from coordinates alone (no store index is needed for a hit).
+// `d` = b - a with its first non-zero component positive; `mid2` = a + b < 2^14 per axis.
+inline uint64_t EdgeKey(const glm::ivec3& mid2, const glm::ivec3& d, int s) {
+  const int len = std::abs(d.x) | std::abs(d.y) | std::abs(d.z);  // the non-zero |d_i| agree
+  const int log2 = __builtin_ctz(static_cast<unsigned>(len));
+  const int dir = ((d.x >> log2) + 1) * 9 + ((d.y >> log2) + 1) * 3 + ((d.z >> log2) + 1);
+  const uint64_t where = uint64_t(mid2.x) | (uint64_t(mid2.y) << 14) | (uint64_t(mid2.z) << 28);
+  return (where << 13) | (uint64_t(dir * 16 + log2) << 4) | uint64_t(s);
+}
 
 // Emits triangles (kEmit) or only counts them, for one subtree.
 template <bool kEmit>
@@ -184,38 +217,39 @@ class Traverser {
     faces_ = RootFaces(root.v);
     if (kEmit) table_->Reset();
     int64_t triangles = 0;
-    Node stack[2 * 3 * 16 + 4];
+    // Depth first, far child first. The current node stays out of the stack: bisection writes
+    // the far child into the spare slot and pushes only the near one.
+    Node stack[3 * 16 + 4];
+    Node slots[2];
+    Node* cur = &slots[0];
+    Node* spare = &slots[1];
+    *cur = root;
     int top = 0;
-    stack[top++] = root;
-    while (top > 0) {
-      const Node t = stack[--top];
+    for (;;) {
       if (kEmit) ++out_->visited;
-      switch (Decide(c_, t)) {
-        case Decision::kCull:
-          break;
-        case Decision::kRefine: {
-          Node kids[2];
-          Bisect(c_, t, kids);
-          stack[top++] = kids[1];  // popped second: drawn later
-          stack[top++] = kids[0];
-          break;
-        }
+      int first, last;
+      switch (Decide(c_, *cur, &first, &last)) {
+        case Decision::kRefine:
+          Bisect(c_, *cur, spare, &stack[top++]);
+          std::swap(cur, spare);
+          continue;
         case Decision::kLeaf:
-          triangles += Leaf(t);
+          triangles += Leaf(*cur, first, last);
           if (!kEmit && triangles > limit) return triangles;
           break;
+        case Decision::kCull:
+          break;
       }
+      if (top == 0) break;
+      *cur = stack[--top];
     }
     return triangles;
   }
 
  private:
-  int Leaf(const Node& t) {
-    const float fmin = std::min(std::min(t.f[0], t.f[1]), std::min(t.f[2], t.f[3]));
-    const float fmax = std::max(std::max(t.f[0], t.f[1]), std::max(t.f[2], t.f[3]));
-    int first, last;
-    IsoRange(c_, fmin, fmax, &first, &last);
+  int Leaf(const Node& t, int first, int last) {
     if (kEmit) ++out_->leaves;
+    if (last - first == 1) return Component(t, first);
     int order[kMaxSurfaces], count = 0;
     if (!c_.ordered) {
       for (int i = first; i < last; ++i) order[count++] = i;
@@ -238,45 +272,36 @@ class Traverser {
   // Marching tetrahedra for sorted isovalue index s.
   int Component(const Node& t, int s) {
     const float iso = c_.iso[s];
-    int inside[4], outside[4], ni = 0, no = 0;
-    for (int i = 0; i < 4; ++i) (t.f[i] >= iso ? inside[ni++] : outside[no++]) = i;
-    if (ni == 0 || no == 0) return 0;
-    if (!kEmit) return ni == 2 ? 2 : 1;
+    const unsigned mask = unsigned(t.f[0] >= iso) | (unsigned(t.f[1] >= iso) << 1) |
+                          (unsigned(t.f[2] >= iso) << 2) | (unsigned(t.f[3] >= iso) << 3);
+    const MarchingTetsCase& mc = (*c_.cases)[mask];
+    if (mc.edge_count == 0) return 0;
+    const int count = mc.edge_count - 2;
+    if (!kEmit) return count;
     uint32_t v[4];
-    int nv = 0;
-    if (ni == 1 || no == 1) {
-      const bool lone_inside = ni == 1;
-      const int lone = lone_inside ? inside[0] : outside[0];
-      const int* others = lone_inside ? outside : inside;
-      for (int i = 0; i < 3; ++i) v[nv++] = EdgeVertex(t, lone, others[i], s);
-    } else {  // quad, in cyclic order around the tetrahedron
-      v[nv++] = EdgeVertex(t, inside[0], outside[0], s);
-      v[nv++] = EdgeVertex(t, inside[0], outside[1], s);
-      v[nv++] = EdgeVertex(t, inside[1], outside[1], s);
-      v[nv++] = EdgeVertex(t, inside[1], outside[0], s);
-    }
-    if (nv == 4 && QuadSplitsAlong13(v)) {
+    for (int i = 0; i < mc.edge_count; ++i) v[i] = EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
+    if (count == 2 && QuadSplitsAlong13(v)) {
       // Rotate the cycle so the fan's diagonal (v0, v2) is the chosen one.
-      const uint32_t first = v[0];
-      v[0] = v[1], v[1] = v[2], v[2] = v[3], v[3] = first;
+      const uint32_t v0 = v[0];
+      v[0] = v[1], v[1] = v[2], v[2] = v[3], v[3] = v0;
     }
-    // Wind so the geometric normal points to decreasing f (out of the region f >= iso).
-    const glm::dvec3 gw = t.g / c_.xf.spacing;
-    const glm::dvec3 p0 = Position(v[0]), p1 = Position(v[1]), p2 = Position(v[2]);
-    const bool flip = glm::dot(glm::cross(p1 - p0, p2 - p0), gw) > 0;
+    // Wound so the geometric normal points to decreasing f (out of the region f >= iso).
+    const bool flip = mc.flip[c_.negative[t.cls.value]];
     const uint8_t surface = c_.iso_surface[s];
-    auto tri = [&](uint32_t a, uint32_t b, uint32_t d) {
-      if (flip) std::swap(b, d);
-      if (c_.clip && !InsideDataBox(t)) {
-        ClipTriangle(a, b, d, surface);
-        return;
-      }
-      out_->mesh.triangles.insert(out_->mesh.triangles.end(), {a, b, d});
-      out_->mesh.surface.push_back(surface);
-    };
-    tri(v[0], v[1], v[2]);
-    if (nv == 4) tri(v[0], v[2], v[3]);
-    return nv == 4 ? 2 : 1;
+    if (c_.clip && !InsideDataBox(t)) {
+      ClipTriangle(v[0], flip ? v[2] : v[1], flip ? v[1] : v[2], surface);
+      if (count == 2) ClipTriangle(v[0], flip ? v[3] : v[2], flip ? v[2] : v[3], surface);
+      return count;
+    }
+    uint32_t* out = out_->triangles.Extend(3 * count);
+    uint8_t* surf = out_->surface.Extend(count);
+    out[0] = v[0], out[1] = flip ? v[2] : v[1], out[2] = flip ? v[1] : v[2];
+    surf[0] = surface;
+    if (count == 2) {
+      out[3] = v[0], out[4] = flip ? v[3] : v[2], out[5] = flip ? v[2] : v[3];
+      surf[1] = surface;
+    }
+    return count;
   }
 
   // A quad is split along its shorter diagonal (better triangles); equal lengths are broken by
@@ -294,7 +319,7 @@ class Traverser {
   }
 
   glm::dvec3 Position(uint32_t i) const {
-    const float* p = &out_->mesh.positions[3 * size_t(i)];
+    const float* p = &out_->positions[3 * size_t(i)];
     return {p[0], p[1], p[2]};
   }
 
@@ -305,60 +330,57 @@ class Traverser {
     return true;
   }
 
-  // Key of (edge, surface): the lower-index endpoint, the edge's direction and scale.
-  // Edges of the hierarchy run along 13 directions with power-of-two lengths, so the
-  // direction and log2(length) pin the upper endpoint down from the lower one.
-  static uint64_t EdgeKey(size_t lo_index, const glm::ivec3& lo, const glm::ivec3& hi, int s) {
-    const glm::ivec3 d = hi - lo;
-    const int scale = std::max(std::max(std::abs(d.x), std::abs(d.y)), std::abs(d.z));
-    const int log2 = __builtin_ctz(static_cast<unsigned>(scale));
-    const int dir = ((d.x >> log2) + 1) * 9 + ((d.y >> log2) + 1) * 3 + ((d.z >> log2) + 1);
-    return (uint64_t(lo_index) << 13) | (uint64_t(dir * 11 + log2) << 4) | uint64_t(s);
-  }
-
+  // The crossing of surface s on the edge between corners ia and ib: found by edge key, or
+  // computed (interpolated from the edge's lexicographically smaller end, so every
+  // tetrahedron around the edge produces the same bits) and stored.
   uint32_t EdgeVertex(const Node& t, int ia, int ib, int s) {
     glm::ivec3 a = t.v[ia], b = t.v[ib];
     float fa = t.f[ia], fb = t.f[ib];
-    size_t index_a = c_.Index(a);
-    const size_t index_b = c_.Index(b);
-    if (index_b < index_a) {  // canonical endpoint order: same bits from every tet
+    glm::ivec3 d = b - a;
+    if ((d.x != 0 ? d.x : d.y != 0 ? d.y : d.z) < 0) {
       std::swap(a, b);
       std::swap(fa, fb);
-      index_a = index_b;
+      d = -d;
     }
-    const uint32_t fresh = static_cast<uint32_t>(out_->mesh.vertex_count());
+    const uint32_t fresh = static_cast<uint32_t>(out_->vertex_count());
     const bool share = c_.normals == NormalMode::kSmooth;
     uint64_t key = 0;
     if (share) {
-      key = EdgeKey(index_a, a, b, s);
+      key = EdgeKey(a + b, d, s);
       const uint32_t found = table_->FindOrInsert(key, fresh);
       if (found != EdgeVertexTable::kMissing) return found;
     }
     const double tt = (double(c_.iso[s]) - fa) / (double(fb) - fa);
-    const glm::dvec3 pg = glm::dvec3(a) + tt * glm::dvec3(b - a);
+    const glm::dvec3 pg = glm::dvec3(a) + tt * glm::dvec3(d);
     const glm::dvec3 pw = c_.xf.origin + c_.xf.spacing * pg;
-    glm::dvec3 grad = share ? glm::mix(GridGradient(a), GridGradient(b), tt) : t.g;
-    grad /= c_.xf.spacing;
-    if (glm::dot(grad, grad) == 0) grad = t.g / c_.xf.spacing;
-    const double len = glm::length(grad);
-    const glm::dvec3 nrm = len > 0 ? -grad / len : glm::dvec3(0.0);
-    out_->mesh.positions.insert(out_->mesh.positions.end(),
-                                {float(pw.x), float(pw.y), float(pw.z)});
-    out_->mesh.normals.insert(out_->mesh.normals.end(), {float(nrm.x), float(nrm.y), float(nrm.z)});
-    if (share && faces_.EdgeOnFace(a, b)) out_->boundary.push_back({fresh, key});
+    glm::vec3 grad = glm::vec3(t.g);
+    if (share) {
+      const glm::vec3 g = glm::mix(GridGradient(a), GridGradient(b), float(tt));
+      if (glm::dot(g, g) != 0) grad = g;
+    }
+    grad *= c_.inv_spacing;
+    const float len2 = glm::dot(grad, grad);
+    const glm::vec3 nrm = len2 > 0 ? grad * (-1.0f / std::sqrt(len2)) : glm::vec3(0.0f);
+    float* p = out_->positions.Extend(3);
+    p[0] = float(pw.x), p[1] = float(pw.y), p[2] = float(pw.z);
+    float* q = out_->normals.Extend(3);
+    q[0] = nrm.x, q[1] = nrm.y, q[2] = nrm.z;
+    if (share && faces_.EdgeOnFace(a + b)) out_->boundary.push_back({fresh, key});
     return fresh;
   }
 
   // Central differences of the samples at a grid point, one-sided on the cube's faces.
-  glm::dvec3 GridGradient(const glm::ivec3& p) const {
-    glm::dvec3 g;
-    for (int a = 0; a < 3; ++a) {
-      glm::ivec3 up = p, down = p;
-      const bool lo = p[a] > 0, hi = p[a] < c_.n - 1;
-      up[a] += hi;
-      down[a] -= lo;
-      g[a] = (double(c_.F(up)) - c_.F(down)) / ((hi ? 1 : 0) + (lo ? 1 : 0));
-    }
+  glm::vec3 GridGradient(const glm::ivec3& p) const {
+    const uint32_t *ox = c_.axis_offset[0], *oy = c_.axis_offset[1], *oz = c_.axis_offset[2];
+    const int last = c_.n - 1;
+    const glm::ivec3 lo(std::max(p.x - 1, 0), std::max(p.y - 1, 0), std::max(p.z - 1, 0));
+    const glm::ivec3 hi(std::min(p.x + 1, last), std::min(p.y + 1, last), std::min(p.z + 1, last));
+    const size_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
+    glm::vec3 g(c_.F(ox[hi.x] + y + z) - c_.F(ox[lo.x] + y + z),
+                c_.F(x + oy[hi.y] + z) - c_.F(x + oy[lo.y] + z),
+                c_.F(x + y + oz[hi.z]) - c_.F(x + y + oz[lo.z]));
+    for (int a = 0; a < 3; ++a)
+      if (hi[a] - lo[a] == 2) g[a] *= 0.5f;
     return g;
   }
 
@@ -368,7 +390,7 @@ class Traverser {
       glm::dvec3 p, n;
     };
     auto load = [&](uint32_t i) {
-      const float* q = &out_->mesh.normals[3 * size_t(i)];
+      const float* q = &out_->normals[3 * size_t(i)];
       return V{Position(i), glm::dvec3(q[0], q[1], q[2])};
     };
     V poly[9], next[9];
@@ -398,15 +420,16 @@ class Traverser {
     }
     for (int i = 0; i < count; ++i) {
       if (ids[i] != EdgeVertexTable::kMissing) continue;
-      ids[i] = static_cast<uint32_t>(out_->mesh.vertex_count());
-      out_->mesh.positions.insert(out_->mesh.positions.end(),
-                                  {float(poly[i].p.x), float(poly[i].p.y), float(poly[i].p.z)});
-      out_->mesh.normals.insert(out_->mesh.normals.end(),
-                                {float(poly[i].n.x), float(poly[i].n.y), float(poly[i].n.z)});
+      ids[i] = static_cast<uint32_t>(out_->vertex_count());
+      float* p = out_->positions.Extend(3);
+      p[0] = float(poly[i].p.x), p[1] = float(poly[i].p.y), p[2] = float(poly[i].p.z);
+      float* q = out_->normals.Extend(3);
+      q[0] = float(poly[i].n.x), q[1] = float(poly[i].n.y), q[2] = float(poly[i].n.z);
     }
     for (int i = 1; i + 1 < count; ++i) {
-      out_->mesh.triangles.insert(out_->mesh.triangles.end(), {ids[0], ids[i], ids[i + 1]});
-      out_->mesh.surface.push_back(surface);
+      uint32_t* out = out_->triangles.Extend(3);
+      out[0] = ids[0], out[1] = ids[i], out[2] = ids[i + 1];
+      out_->surface.Push(surface);
     }
   }
 

@@ -198,7 +198,7 @@ TriKey MakeKey(int surface, std::array<glm::vec3, 3> p) {
 // Brute-force marching tetrahedra over the reflected Kuhn triangulation, built directly from
 // the grid (each unit cube split around the diagonal through its all-even corner), with the
 // same conventions: a vertex is inside when f >= iso, crossings interpolated from the
-// lower-index endpoint, quads split along the shorter diagonal (ties by position).
+// lexicographically smaller endpoint, quads split along the shorter diagonal (ties by position).
 std::multiset<TriKey> BruteForce(const Hierarchy& h, const std::vector<float>& iso) {
   std::multiset<TriKey> tris;
   const int n = h.n();
@@ -222,7 +222,7 @@ std::multiset<TriKey> BruteForce(const Hierarchy& h, const std::vector<float>& i
             auto cross = [&](int i, int j) {
               glm::ivec3 a = v[i], b = v[j];
               float fa = f[i], fb = f[j];
-              if (h.index(b.x, b.y, b.z) < h.index(a.x, a.y, a.z))
+              if (std::tie(b.x, b.y, b.z) < std::tie(a.x, a.y, a.z))
                 std::swap(a, b), std::swap(fa, fb);
               const double t = (double(iso[s]) - fa) / (double(fb) - fa);
               return glm::vec3(glm::dvec3(a) + t * glm::dvec3(b - a));

@@ -1,0 +1,49 @@
+// An append-only array for the traversal's output: Extend(n) hands out n uninitialised slots
+// and grows by doubling. std::vector's insert of a few elements at a time is an out-of-line
+// call per triangle; this is a compare and a pointer bump.
+#pragma once
+
+#include <cstddef>
+#include <cstring>
+#include <memory>
+
+namespace isostream {
+
+template <typename T>
+class AppendBuffer {
+ public:
+  T* Extend(size_t count) {
+    if (size_ + count > capacity_) Grow(size_ + count);
+    T* out = data_.get() + size_;
+    size_ += count;
+    return out;
+  }
+  void Push(T value) { *Extend(1) = value; }
+
+  size_t size() const { return size_; }
+  const T* data() const { return data_.get(); }
+  T* data() { return data_.get(); }
+  T& operator[](size_t i) { return data_[i]; }
+  const T& operator[](size_t i) const { return data_[i]; }
+  void clear() { size_ = 0; }
+  void release() {
+    data_.reset();
+    size_ = capacity_ = 0;
+  }
+
+ private:
+  void Grow(size_t needed) {
+    size_t capacity = capacity_ ? 2 * capacity_ : 1024;
+    while (capacity < needed) capacity *= 2;
+    std::unique_ptr<T[]> bigger(new T[capacity]);  // trivial T: left uninitialised
+    if (size_) std::memcpy(bigger.get(), data_.get(), size_ * sizeof(T));
+    data_ = std::move(bigger);
+    capacity_ = capacity;
+  }
+
+  std::unique_ptr<T[]> data_;
+  size_t size_ = 0;
+  size_t capacity_ = 0;
+};
+
+}  // namespace isostream
