@@ -32,7 +32,7 @@ class EdgeVertexTable {
   // (the caller then creates vertex `fresh`).
   uint32_t FindOrInsert(uint64_t key, uint32_t fresh) {
     if (2 * (size_ + 1) > slots_.size()) Grow();
-    size_t i = Hash(key) & mask_;
+    size_t i = Hash(key);
     for (;;) {
       Slot& s = slots_[i];
       if (s.generation != generation_) {
@@ -59,16 +59,13 @@ class EdgeVertexTable {
     while (c < n) c <<= 1;
     return c;
   }
-  static uint64_t Hash(uint64_t k) {  // a 64-bit mix (splitmix64 finaliser constants)
-    k ^= k >> 30;
-    k *= 0xbf58476d1ce4e5b9ull;
-    k ^= k >> 27;
-    k *= 0x94d049bb133111ebull;
-    return k ^ (k >> 31);
-  }
+  // Fibonacci hashing: keys are packed coordinates, and one multiply spreads them well
+  // enough; the high bits are used.
+  size_t Hash(uint64_t k) const { return size_t((k * 0x9e3779b97f4a7c15ull) >> shift_); }
   void Allocate(size_t capacity) {
     slots_.assign(capacity, Slot{0, 0, 0});
     mask_ = capacity - 1;
+    shift_ = 64 - __builtin_ctzll(capacity);
     generation_ = 1;
     size_ = 0;
   }
@@ -83,6 +80,7 @@ class EdgeVertexTable {
 
   std::vector<Slot> slots_;
   size_t mask_ = 0;
+  int shift_ = 64;
   size_t size_ = 0;
   uint32_t generation_ = 1;
 };

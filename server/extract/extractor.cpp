@@ -112,15 +112,17 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
   std::vector<Node> items;
   for (int i : order) {
     Node t;
-    t.v = InitialVertices(tables, i, size);
-    for (int j = 0; j < 4; ++j) t.f[j] = c.F(t.v[j]);
-    const glm::dmat3 e(glm::dvec3(t.v[1] - t.v[0]), glm::dvec3(t.v[2] - t.v[0]),
-                       glm::dvec3(t.v[3] - t.v[0]));
+    const TetVertices v = InitialVertices(tables, i, size);
+    for (int j = 0; j < 4; ++j) {
+      t.v[j] = extract_internal::Pack(v[j]);
+      t.f[j] = c.F(v[j]);
+    }
+    const glm::dmat3 e(glm::dvec3(v[1] - v[0]), glm::dvec3(v[2] - v[0]), glm::dvec3(v[3] - v[0]));
     const glm::dvec3 df(t.f[1] - t.f[0], t.f[2] - t.f[0], t.f[3] - t.f[0]);
     t.g = glm::inverse(glm::transpose(e)) * df;  // the only direct solve: the six roots
     t.cls = tables.initial_class(i);
     t.level = 0;
-    t.xref = c.Index(RefinementPoint(t.v));
+    t.xref = c.Index(RefinementPoint(v));
     items.push_back(t);
   }
   constexpr size_t kTargetSubtrees = 256;

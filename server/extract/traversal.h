@@ -29,8 +29,21 @@
 
 namespace isostream::extract_internal {
 
+// A grid point packed as x | y << 21 | z << 42. Coordinates are below 2^13 (k <= 12), so sums
+// of two points stay inside their fields: a refinement vertex is (v0 + v3) >> 1 (both ends have
+// the same parity per axis, so no bit crosses a field), and a + b is an edge's doubled midpoint.
+using PackedPoint = uint64_t;
+inline constexpr int kFieldBits = 21;
+inline constexpr uint64_t kFieldMask = (uint64_t{1} << kFieldBits) - 1;
+inline PackedPoint Pack(const glm::ivec3& p) {
+  return uint64_t(p.x) | (uint64_t(p.y) << kFieldBits) | (uint64_t(p.z) << (2 * kFieldBits));
+}
+inline glm::ivec3 Unpack(PackedPoint p) {
+  return {int(p & kFieldMask), int((p >> kFieldBits) & kFieldMask), int(p >> (2 * kFieldBits))};
+}
+
 struct Node {
-  TetVertices v;
+  PackedPoint v[4];  // canonical vertex order of the class
   float f[4];
   glm::dvec3 g;  // gradient of the linear interpolant on T, grid units
   size_t xref;   // store index of the refinement vertex (unused at the finest level)
@@ -64,6 +77,10 @@ struct Context {
   size_t Index(const glm::ivec3& p) const {  // Hierarchy::index
     return size_t(axis_offset[0][p.x]) + axis_offset[1][p.y] + axis_offset[2][p.z];
   }
+  size_t Index(PackedPoint p) const {
+    return size_t(axis_offset[0][p & kFieldMask]) +
+           axis_offset[1][(p >> kFieldBits) & kFieldMask] + axis_offset[2][p >> (2 * kFieldBits)];
+  }
   float F(size_t i) const { return bricks[i >> 9].value[i & 511]; }
   float Eta(size_t i) const { return DecodeEta(bricks[i >> 9].eta[i & 511]); }
   float F(const glm::ivec3& p) const { return F(Index(p)); }
@@ -88,8 +105,9 @@ inline void IsoRange(const Context& c, float lo, float hi, int* first, int* last
 // For a leaf, [*first, *last) are the sorted isovalues that cross it.
 inline Decision Decide(const Context& c, const Node& t, int* first, int* last) {
   if (c.clip) {
+    const glm::ivec3 v[4] = {Unpack(t.v[0]), Unpack(t.v[1]), Unpack(t.v[2]), Unpack(t.v[3])};
     for (int a = 0; a < 3; ++a) {
-      const int lo = std::min(std::min(t.v[0][a], t.v[1][a]), std::min(t.v[2][a], t.v[3][a]));
+      const int lo = std::min(std::min(v[0][a], v[1][a]), std::min(v[2][a], v[3][a]));
       if (lo >= c.data_max[a]) return Decision::kCull;
     }
   }
@@ -117,15 +135,15 @@ inline Decision Decide(const Context& c, const Node& t) {
 // The children of t in draw order: the farther one (drawn first) in *first.
 inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
-  const glm::ivec3 x = RefinementPoint(t.v);
+  const PackedPoint x = (t.v[0] + t.v[3]) >> 1;
   const float fx = c.F(t.xref);
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
-  const glm::ivec3 points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
+  const PackedPoint points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
   const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
   bool child0_first = true;
   if (c.ordered) {
     const double side = c.orthographic ? -glm::dot(rt.plane_normal, c.dir)
-                                       : glm::dot(rt.plane_normal, c.eye - glm::dvec3(x));
+                                       : glm::dot(rt.plane_normal, c.eye - glm::dvec3(Unpack(x)));
     child0_first = side <= 0;  // eye on child 1's side: child 0 is farther
   }
   for (int ch = 0; ch < 2; ++ch) {
@@ -141,7 +159,7 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
     // The child's first read is its refinement vertex: start fetching it now (the second
     // child has a whole subtree's time to arrive).
     if (o.level < 3 * c.k) {
-      o.xref = c.Index(RefinementPoint(o.v));
+      o.xref = c.Index((o.v[0] + o.v[3]) >> 1);
       c.Prefetch(o.xref);
     }
   }
@@ -155,9 +173,10 @@ struct SubtreeMesh {
   AppendBuffer<uint32_t> triangles;
   AppendBuffer<uint8_t> surface;
   std::vector<std::pair<uint32_t, uint64_t>> boundary;  // (local vertex, edge key)
+  uint32_t vertices = 0;
   int64_t visited = 0;
   int64_t leaves = 0;
-  size_t vertex_count() const { return positions.size() / 3; }
+  size_t vertex_count() const { return vertices; }
   size_t triangle_count() const { return surface.size(); }
   void release() {  // appended: give the memory back before the frame ends
     positions.release();
@@ -193,17 +212,11 @@ struct RootFaces {
   }
 };
 
-// Key of (edge, surface): the edge's doubled midpoint, its direction up to sign and its scale.
-// Edges of the hierarchy run along 13 directions with power-of-two lengths. Symmetric in the
-// endpoints, and computed from coordinates alone (no store index is needed for a hit).
-// `d` = b - a with its first non-zero component positive; `mid2` = a + b < 2^14 per axis.
-inline uint64_t EdgeKey(const glm::ivec3& mid2, const glm::ivec3& d, int s) {
-  const int len = std::abs(d.x) | std::abs(d.y) | std::abs(d.z);  // the non-zero |d_i| agree
-  const int log2 = __builtin_ctz(static_cast<unsigned>(len));
-  const int dir = ((d.x >> log2) + 1) * 9 + ((d.y >> log2) + 1) * 3 + ((d.z >> log2) + 1);
-  const uint64_t where = uint64_t(mid2.x) | (uint64_t(mid2.y) << 14) | (uint64_t(mid2.z) << 28);
-  return (where << 13) | (uint64_t(dir * 16 + log2) << 4) | uint64_t(s);
-}
+// Key of (edge, surface): the edge's doubled midpoint (packed). Leaves of the adaptive mesh
+// form a conforming tetrahedral mesh (saturated eta: no hanging node), where two distinct
+// edges never share an interior point, so the midpoint alone names the edge. Symmetric in the
+// endpoints; 3 fields of 21 bits leave the top bit clear, and the surface goes below.
+inline uint64_t EdgeKey(PackedPoint mid2, int s) { return (mid2 << 4) | uint64_t(s); }
 
 // Emits triangles (kEmit) or only counts them, for one subtree.
 template <bool kEmit>
@@ -214,7 +227,7 @@ class Traverser {
 
   // Returns the triangle count (stops early past `limit` when counting).
   int64_t Run(const Node& root, int64_t limit = INT64_MAX) {
-    faces_ = RootFaces(root.v);
+    faces_ = RootFaces({Unpack(root.v[0]), Unpack(root.v[1]), Unpack(root.v[2]), Unpack(root.v[3])});
     if (kEmit) table_->Reset();
     int64_t triangles = 0;
     // Depth first, far child first. The current node stays out of the stack: bisection writes
@@ -258,7 +271,7 @@ class Traverser {
       for (int i = first; i < last; ++i) order[count++] = descending ? last - 1 - (i - first) : i;
     } else {
       // Isovalues above f_T(eye), highest first; then those at or below it, lowest first.
-      const double fe = t.f[0] + glm::dot(t.g, c_.eye - glm::dvec3(t.v[0]));
+      const double fe = t.f[0] + glm::dot(t.g, c_.eye - glm::dvec3(Unpack(t.v[0])));
       int split = first;
       while (split < last && c_.iso[split] <= fe) ++split;
       for (int i = last - 1; i >= split; --i) order[count++] = i;
@@ -326,7 +339,7 @@ class Traverser {
   bool InsideDataBox(const Node& t) const {
     for (int i = 0; i < 4; ++i)
       for (int a = 0; a < 3; ++a)
-        if (t.v[i][a] > c_.data_max[a]) return false;
+        if (Unpack(t.v[i])[a] > c_.data_max[a]) return false;
     return true;
   }
 
@@ -334,21 +347,22 @@ class Traverser {
   // computed (interpolated from the edge's lexicographically smaller end, so every
   // tetrahedron around the edge produces the same bits) and stored.
   uint32_t EdgeVertex(const Node& t, int ia, int ib, int s) {
-    glm::ivec3 a = t.v[ia], b = t.v[ib];
+    const PackedPoint mid2 = t.v[ia] + t.v[ib];
+    const uint32_t fresh = out_->vertices;
+    const bool share = c_.normals == NormalMode::kSmooth;
+    uint64_t key = 0;
+    if (share) {
+      key = EdgeKey(mid2, s);
+      const uint32_t found = table_->FindOrInsert(key, fresh);
+      if (found != EdgeVertexTable::kMissing) return found;
+    }
+    glm::ivec3 a = Unpack(t.v[ia]), b = Unpack(t.v[ib]);
     float fa = t.f[ia], fb = t.f[ib];
     glm::ivec3 d = b - a;
     if ((d.x != 0 ? d.x : d.y != 0 ? d.y : d.z) < 0) {
       std::swap(a, b);
       std::swap(fa, fb);
       d = -d;
-    }
-    const uint32_t fresh = static_cast<uint32_t>(out_->vertex_count());
-    const bool share = c_.normals == NormalMode::kSmooth;
-    uint64_t key = 0;
-    if (share) {
-      key = EdgeKey(a + b, d, s);
-      const uint32_t found = table_->FindOrInsert(key, fresh);
-      if (found != EdgeVertexTable::kMissing) return found;
     }
     const double tt = (double(c_.iso[s]) - fa) / (double(fb) - fa);
     const glm::dvec3 pg = glm::dvec3(a) + tt * glm::dvec3(d);
@@ -365,7 +379,8 @@ class Traverser {
     p[0] = float(pw.x), p[1] = float(pw.y), p[2] = float(pw.z);
     float* q = out_->normals.Extend(3);
     q[0] = nrm.x, q[1] = nrm.y, q[2] = nrm.z;
-    if (share && faces_.EdgeOnFace(a + b)) out_->boundary.push_back({fresh, key});
+    ++out_->vertices;
+    if (share && faces_.EdgeOnFace(Unpack(mid2))) out_->boundary.push_back({fresh, key});
     return fresh;
   }
 
@@ -420,7 +435,7 @@ class Traverser {
     }
     for (int i = 0; i < count; ++i) {
       if (ids[i] != EdgeVertexTable::kMissing) continue;
-      ids[i] = static_cast<uint32_t>(out_->vertex_count());
+      ids[i] = out_->vertices++;
       float* p = out_->positions.Extend(3);
       p[0] = float(poly[i].p.x), p[1] = float(poly[i].p.y), p[2] = float(poly[i].p.z);
       float* q = out_->normals.Extend(3);
