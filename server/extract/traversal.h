@@ -229,7 +229,7 @@ class Traverser {
   int64_t Run(const Node& root, int64_t limit = INT64_MAX) {
     faces_ = RootFaces({Unpack(root.v[0]), Unpack(root.v[1]), Unpack(root.v[2]), Unpack(root.v[3])});
     if (kEmit) table_->Reset();
-    int64_t triangles = 0;
+    int64_t triangles = 0, visited = 0;
     // Depth first, far child first. The current node stays out of the stack: bisection writes
     // the far child into the spare slot and pushes only the near one.
     Node stack[3 * 16 + 4];
@@ -239,7 +239,7 @@ class Traverser {
     *cur = root;
     int top = 0;
     for (;;) {
-      if (kEmit) ++out_->visited;
+      ++visited;
       int first, last;
       switch (Decide(c_, *cur, &first, &last)) {
         case Decision::kRefine:
@@ -248,7 +248,7 @@ class Traverser {
           continue;
         case Decision::kLeaf:
           triangles += Leaf(*cur, first, last);
-          if (!kEmit && triangles > limit) return triangles;
+          if (!kEmit && triangles > limit) return triangles;  // counting: enough seen
           break;
         case Decision::kCull:
           break;
@@ -256,6 +256,7 @@ class Traverser {
       if (top == 0) break;
       *cur = stack[--top];
     }
+    if (kEmit) out_->visited += visited;
     return triangles;
   }
 
@@ -348,14 +349,17 @@ class Traverser {
   // tetrahedron around the edge produces the same bits) and stored.
   uint32_t EdgeVertex(const Node& t, int ia, int ib, int s) {
     const PackedPoint mid2 = t.v[ia] + t.v[ib];
+    if (c_.normals != NormalMode::kSmooth) return NewVertex(t, ia, ib, s, mid2, 0);
+    const uint64_t key = EdgeKey(mid2, s);
+    const uint32_t found = table_->FindOrInsert(key, out_->vertices);
+    return found != EdgeVertexTable::kMissing ? found : NewVertex(t, ia, ib, s, mid2, key);
+  }
+
+  // Out of line: most lookups hit, and the hit path stays small enough to inline.
+  __attribute__((noinline)) uint32_t NewVertex(const Node& t, int ia, int ib, int s,
+                                               PackedPoint mid2, uint64_t key) {
     const uint32_t fresh = out_->vertices;
     const bool share = c_.normals == NormalMode::kSmooth;
-    uint64_t key = 0;
-    if (share) {
-      key = EdgeKey(mid2, s);
-      const uint32_t found = table_->FindOrInsert(key, fresh);
-      if (found != EdgeVertexTable::kMissing) return found;
-    }
     glm::ivec3 a = Unpack(t.v[ia]), b = Unpack(t.v[ib]);
     float fa = t.f[ia], fb = t.f[ib];
     glm::ivec3 d = b - a;
@@ -391,12 +395,10 @@ class Traverser {
     const glm::ivec3 lo(std::max(p.x - 1, 0), std::max(p.y - 1, 0), std::max(p.z - 1, 0));
     const glm::ivec3 hi(std::min(p.x + 1, last), std::min(p.y + 1, last), std::min(p.z + 1, last));
     const size_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
-    glm::vec3 g(c_.F(ox[hi.x] + y + z) - c_.F(ox[lo.x] + y + z),
-                c_.F(x + oy[hi.y] + z) - c_.F(x + oy[lo.y] + z),
-                c_.F(x + y + oz[hi.z]) - c_.F(x + y + oz[lo.z]));
-    for (int a = 0; a < 3; ++a)
-      if (hi[a] - lo[a] == 2) g[a] *= 0.5f;
-    return g;
+    static constexpr float kInvSpan[3] = {0.0f, 1.0f, 0.5f};  // by hi - lo
+    return {(c_.F(ox[hi.x] + y + z) - c_.F(ox[lo.x] + y + z)) * kInvSpan[hi.x - lo.x],
+            (c_.F(x + oy[hi.y] + z) - c_.F(x + oy[lo.y] + z)) * kInvSpan[hi.y - lo.y],
+            (c_.F(x + y + oz[hi.z]) - c_.F(x + y + oz[lo.z])) * kInvSpan[hi.z - lo.z]};
   }
 
   // A leaf that straddles the data box: keep the part of the triangle inside it.
