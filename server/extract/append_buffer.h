@@ -21,6 +21,7 @@ class AppendBuffer {
   void Push(T value) { *Extend(1) = value; }
 
   size_t size() const { return size_; }
+  size_t capacity() const { return capacity_; }
   const T* data() const { return data_.get(); }
   T* data() { return data_.get(); }
   T& operator[](size_t i) { return data_[i]; }

@@ -29,6 +29,7 @@ using extract_internal::Decide;
 using extract_internal::Decision;
 using extract_internal::Node;
 using extract_internal::SubtreeMesh;
+using extract_internal::SubtreeMeshPool;
 using extract_internal::Traverser;
 
 absl::Status ValidateRequest(const ExtractRequest& r) {
@@ -149,10 +150,6 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
   return items;
 }
 
-struct Scratch {
-  EdgeVertexTable table{1 << 14};
-};
-
 int64_t CountAt(const Context& c, int64_t limit) {
   const std::vector<Node> items = SplitIntoSubtrees(c);
   std::atomic<int64_t> total{0};
@@ -246,7 +243,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   // order also settles vertex sharing across subtrees: a vertex on a subtree's boundary faces
   // is looked up by edge key, and the first occurrence in draw order keeps its index.
   t0 = std::chrono::steady_clock::now();
-  std::vector<SubtreeMesh> parts(items.size());
+  std::vector<std::unique_ptr<SubtreeMesh>> parts(items.size());
+  SubtreeMeshPool& pool = SubtreeMeshPool::Global();
   std::vector<char> done(items.size(), 0);
   size_t next = 0;
   std::mutex mu;
@@ -294,7 +292,6 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
                      part.surface.data() + part.surface.size());
     st.tets_visited += part.visited;
     st.leaves += part.leaves;
-    part.release();
     join_ms += Ms(tj);
     if (observer && observer->on_ready) observer->on_ready(m, first, m.triangle_count());
   };
@@ -308,17 +305,23 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     tbb::parallel_for(
         0, workers,
         [&](int) {
-          Scratch scratch;
+          // One table per worker thread, kept across frames (TBB's threads persist).
+          static thread_local EdgeVertexTable table(1 << 14);
           for (size_t i = next_item++; i < items.size(); i = next_item++) {
             if (observer && observer->cancel && observer->cancel->load(std::memory_order_relaxed)) {
               cancelled = true;
               return;
             }
-            Traverser<true> t(c, &scratch.table, &parts[i]);
+            std::unique_ptr<SubtreeMesh> part = pool.Acquire();
+            Traverser<true> t(c, &table, part.get());
             t.Run(items[i]);
             std::lock_guard<std::mutex> lock(mu);
+            parts[i] = std::move(part);
             done[i] = 1;
-            while (next < items.size() && done[next] && !cancelled) append(parts[next++]);
+            while (next < items.size() && done[next] && !cancelled) {
+              append(*parts[next]);
+              pool.Release(std::move(parts[next++]));
+            }
           }
         },
         tbb::simple_partitioner());

@@ -20,10 +20,10 @@
 #include <glm/vec3.hpp>
 #include <vector>
 
-#include "server/extract/append_buffer.h"
 #include "server/extract/edge_vertex_table.h"
 #include "server/extract/extract_request.h"
 #include "server/extract/marching_tets.h"
+#include "server/extract/subtree_mesh.h"
 #include "server/hierarchy/bisection.h"
 #include "server/hierarchy/hierarchy.h"
 
@@ -164,28 +164,6 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
     }
   }
 }
-
-// Output of one subtree: a mesh with local vertex indices, plus the vertices that lie on the
-// subtree root's faces (they may be shared with a neighbouring subtree and are merged later).
-struct SubtreeMesh {
-  AppendBuffer<float> positions;  // 3 per vertex
-  AppendBuffer<float> normals;    // 3 per vertex
-  AppendBuffer<uint32_t> triangles;
-  AppendBuffer<uint8_t> surface;
-  std::vector<std::pair<uint32_t, uint64_t>> boundary;  // (local vertex, edge key)
-  uint32_t vertices = 0;
-  int64_t visited = 0;
-  int64_t leaves = 0;
-  size_t vertex_count() const { return vertices; }
-  size_t triangle_count() const { return surface.size(); }
-  void release() {  // appended: give the memory back before the frame ends
-    positions.release();
-    normals.release();
-    triangles.release();
-    surface.release();
-    boundary = {};
-  }
-};
 
 // Integer planes of a subtree root's faces, to recognise edges that lie on them.
 struct RootFaces {
