@@ -261,33 +261,32 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     // part's own copy dropped; the others are copied and get compacted indices.
     constexpr uint32_t kUnset = 0xffffffffu;
     to_global.assign(part_vertices, kUnset);
-    size_t reused = 0;
     for (const auto& [local, key] : part.boundary) {
       auto it = boundary_ids.find(key);
-      if (it != boundary_ids.end()) to_global[local] = it->second, ++reused;
+      if (it != boundary_ids.end()) to_global[local] = it->second;
     }
+    // Owned vertices are copied in runs between the (few) reused ones.
     size_t out = m.vertex_count();
-    m.positions.resize(3 * (out + part_vertices - reused));
-    m.normals.resize(3 * (out + part_vertices - reused));
     const float* pos = part.positions.data();
     const float* nrm = part.normals.data();
-    float* mpos = m.positions.data();
-    float* mnrm = m.normals.data();
-    for (size_t v = 0; v < part_vertices; ++v) {
-      if (to_global[v] != kUnset) continue;
-      for (int i = 0; i < 3; ++i) {
-        mpos[3 * out + i] = pos[3 * v + i];
-        mnrm[3 * out + i] = nrm[3 * v + i];
+    for (size_t v = 0; v < part_vertices;) {
+      if (to_global[v] != kUnset) {
+        ++v;
+        continue;
       }
-      to_global[v] = uint32_t(out++);
+      size_t end = v;
+      while (end < part_vertices && to_global[end] == kUnset) to_global[end++] = uint32_t(out++);
+      m.positions.insert(m.positions.end(), pos + 3 * v, pos + 3 * end);
+      m.normals.insert(m.normals.end(), nrm + 3 * v, nrm + 3 * end);
+      v = end;
     }
     for (const auto& [local, key] : part.boundary) boundary_ids.emplace(key, to_global[local]);
     const size_t first = m.triangle_count();
     const size_t tri_base = m.triangles.size();
-    m.triangles.resize(tri_base + part.triangles.size());
-    uint32_t* tri = m.triangles.data() + tri_base;
-    const uint32_t* local_tri = part.triangles.data();
-    for (size_t j = 0; j < part.triangles.size(); ++j) tri[j] = to_global[local_tri[j]];
+    m.triangles.insert(m.triangles.end(), part.triangles.data(),
+                       part.triangles.data() + part.triangles.size());
+    for (auto it = m.triangles.begin() + tri_base; it != m.triangles.end(); ++it)
+      *it = to_global[*it];
     m.surface.insert(m.surface.end(), part.surface.data(),
                      part.surface.data() + part.surface.size());
     st.tets_visited += part.visited;
