@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "server/extract/budget_memo.h"
 #include "server/hierarchy/hierarchy.h"
 #include "shared/ordered_mesh.h"
 #include "shared/status.h"
@@ -39,6 +40,8 @@ struct ExtractRequest {
   DrawOrder order = DrawOrder::kBackToFront;
   NormalMode normals = NormalMode::kSmooth;
   int threads = 0;  // 0: all cores
+  // Optional, not owned: remembers budget -> eps for this hierarchy across requests.
+  BudgetMemo* budget_memo = nullptr;
 };
 
 struct ExtractStats {

@@ -18,6 +18,7 @@
 #include <glm/matrix.hpp>
 #include <mutex>
 #include <numeric>
+#include <optional>
 #include <unordered_map>
 
 #include "server/extract/traversal.h"
@@ -158,7 +159,10 @@ int64_t CountAt(const Context& c, int64_t limit) {
     Traverser<false> t(c, nullptr, nullptr);
     total += t.Run(items[i], limit);
   });
-  return total.load();
+  // Past the limit the sum depends on which subtrees ran before the others stopped (thread
+  // timing): report limit + 1, so the budget search is deterministic and view-independent.
+  const int64_t n = total.load();
+  return n > limit ? limit + 1 : n;
 }
 
 }  // namespace
@@ -180,7 +184,11 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   tbb::task_arena arena(r.threads > 0 ? r.threads : tbb::task_arena::automatic);
 
   double eps = r.eps;
-  if (r.budget > 0) {
+  std::optional<double> remembered;
+  if (r.budget > 0 && r.budget_memo) remembered = r.budget_memo->Find(r.isovalues, r.budget);
+  if (remembered) {
+    eps = *remembered;
+  } else if (r.budget > 0) {
     // Triangle count never grows with eps (saturated eta nests the meshes), so the smallest
     // eps that fits is bracketed and the bracket shrunk until its ends are within 1% of each
     // other: then 0.99 eps no longer fits. Probes count triangles only and stop at 4x the
@@ -228,6 +236,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       eps = have_lo ? std::exp(x_hi) : (count_at(0.0) <= r.budget ? 0.0 : std::exp(x_hi));
     });
     st.budget_ms = Ms(t0);
+    if (r.budget_memo) r.budget_memo->Store(r.isovalues, r.budget, eps);
   }
   st.eps_used = eps;
   const Context c = MakeContext(h, xf, r, eps);

@@ -38,7 +38,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& hierarchy, const GridToWo
                                       const ExtractRequest& request,
                                       const ExtractObserver* observer = nullptr);
 
-// Triangle count at a given eps without building the mesh; stops counting past `limit`.
+// Triangle count at a given eps without building the mesh; stops counting past `limit` and
+// then returns limit + 1.
 // Used by the budget search; exposed for tests and benchmarks.
 absl::StatusOr<int64_t> CountTriangles(const Hierarchy& hierarchy, const GridToWorld& xf,
                                        const ExtractRequest& request, double eps,

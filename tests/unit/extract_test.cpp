@@ -349,6 +349,38 @@ TEST(Extract, BudgetFindsTheSmallestEpsThatFits) {
   }
 }
 
+// The eps for a budget does not depend on the view, so a memo answers later views without
+// counting passes, and gives exactly what a new search gives.
+TEST(Extract, BudgetMemoSkipsTheSearchForLaterViews) {
+  const auto h = MakeHierarchy(5, BlobsField);
+  BudgetMemo memo;
+  ExtractRequest r = Request({0.5f, 0.2f}, 0, {50, 50, 50});
+  r.budget = 3000;
+  r.budget_memo = &memo;
+  const auto first = RunExtract(*h, r);
+  EXPECT_GT(first.stats.budget_passes, 0);
+
+  ExtractRequest other_view = r;
+  other_view.view.eye = {-30, 12, 70};
+  const auto remembered = RunExtract(*h, other_view);
+  EXPECT_EQ(remembered.stats.budget_passes, 0);
+  EXPECT_EQ(remembered.stats.eps_used, first.stats.eps_used);
+  other_view.budget_memo = nullptr;
+  const auto searched = RunExtract(*h, other_view);
+  EXPECT_EQ(searched.stats.eps_used, remembered.stats.eps_used);
+  EXPECT_EQ(searched.mesh.triangles, remembered.mesh.triangles);
+
+  ExtractRequest reordered = r;  // the same isovalue set in another order hits too
+  reordered.isovalues = {0.2f, 0.5f};
+  EXPECT_EQ(RunExtract(*h, reordered).stats.budget_passes, 0);
+  ExtractRequest new_budget = r;
+  new_budget.budget = 1000;
+  EXPECT_GT(RunExtract(*h, new_budget).stats.budget_passes, 0);
+  ExtractRequest new_iso = r;
+  new_iso.isovalues = {0.5f};
+  EXPECT_GT(RunExtract(*h, new_iso).stats.budget_passes, 0);
+}
+
 TEST(Extract, WorldPositionsFollowSpacingAndOrigin) {
   const auto h = MakeHierarchy(4, SphereField);
   const GridToWorld xf{{-1, -2, -3}, {0.5, 0.25, 2.0}};
