@@ -55,9 +55,10 @@
 namespace isostream {
 namespace {
 
-// Large buffers are first touched by the parallel passes; asking for transparent huge pages
-// cuts the page faults of a 513^3 build from ~330 k to ~650 (the kernel zeroing each page
-// was a third to a half of the build time). Only a hint: ignored where THP is off.
+// The bricks are first touched by the parallel scale-0 pass; asking for transparent huge
+// pages cuts the page faults of a 513^3 build from ~330 k to ~650. Only a hint: ignored where
+// THP is off. (First-touching fresh memory is still most of a cold 513^3 build on the
+// project's VM: BENCHMARKS.md.)
 void AdviseHugePages(void* data, size_t bytes) {
   constexpr uintptr_t kHuge = uintptr_t{2} << 20;
   const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
@@ -78,8 +79,8 @@ inline float RoundUp(double v) {
   return f;
 }
 
-// eta of a scale-0 diamond at t[p] with refinement edge (p - d, p + d) and no children (an
-// edge centre), or with children whose eta is `worst`.
+// eta of the diamond at tile point p with refinement edge (p - d, p + d), given the largest
+// eta of its children (0 if it has none).
 inline float Eta(const float* t, int p, int d, float worst) {
   const double w = static_cast<double>(t[p]) - 0.5 * (static_cast<double>(t[p + d]) + t[p - d]);
   return RoundUp(std::fabs(w) + worst);
