@@ -22,15 +22,31 @@
 //   face centre : the 4 edge centres x +- u e_a, a odd      (same h)
 //   edge centre : the 8 cube centres x + (+-u/2)^3           (h - 1), those inside the domain
 // Bottom-up order is therefore: for h = 0..k-1, edges, then faces, then cubes.
+//
+// How it is computed (the values are exactly those of the definition: eta in float, each
+// level rounded up from |w| + max child in double, and only the stored copy rounded up once
+// more to bfloat16; tests/unit/hierarchy_test.cpp checks every stored bit against a plain
+// recursion over the tree). One parallel pass per scale h, over tiles of 8^3 cells of the
+// scale's lattice (spacing 2^h): a scale's diamonds reach one lattice point each way, so a
+// tile's eta follows from its 9^3 lattice samples (and, for edge centres, the previous
+// scale's cube centres half a cell away), all in L1. The builder touches no memory beyond
+// the bricks it returns:
+//  * Scale 0 (7/8 of the points): a tile is a brick. The pass writes each brick whole
+//    (samples and eta, first touch of its pages).
+//  * Scales 1..k-1 gather their samples from the linear array and store each point's bfloat16
+//    eta into its brick. The float eta of each scale's cube centres, which the next scale's
+//    edge centres need, overwrites their samples in the linear array: nothing reads those
+//    samples again (a diamond reads the samples at its refinement edge's ends, coarser
+//    points, and the brick store already holds all samples).
 #include "server/hierarchy/hierarchy.h"
 
 #include <sys/mman.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 
@@ -39,9 +55,10 @@
 namespace isostream {
 namespace {
 
-// Large buffers are first touched by the parallel passes; asking for transparent huge pages
-// cuts the page faults of a 513^3 build from ~330 k to ~650 (the kernel zeroing each page
-// was a third to a half of the build time). Only a hint: ignored where THP is off.
+// The bricks are first touched by the parallel scale-0 pass; asking for transparent huge
+// pages cuts the page faults of a 513^3 build from ~330 k to ~650. Only a hint: ignored where
+// THP is off. (First-touching fresh memory is still most of a cold 513^3 build on the
+// project's VM: BENCHMARKS.md.)
 void AdviseHugePages(void* data, size_t bytes) {
   constexpr uintptr_t kHuge = uintptr_t{2} << 20;
   const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
@@ -49,149 +66,300 @@ void AdviseHugePages(void* data, size_t bytes) {
   if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
 }
 
-float RoundUp(double v) {
+// The smallest float >= v (v >= 0). For f >= +0 the next float up is the next bit pattern
+// (std::nextafter(f, INFINITY), without the library call).
+inline float RoundUp(double v) {
   float f = static_cast<float>(v);
-  if (static_cast<double>(f) < v) f = std::nextafter(f, INFINITY);
+  if (static_cast<double>(f) < v) {
+    uint32_t bits;
+    std::memcpy(&bits, &f, sizeof(bits));
+    ++bits;
+    std::memcpy(&f, &bits, sizeof(f));
+  }
   return f;
+}
+
+// eta of the diamond at tile point p with refinement edge (p - d, p + d), given the largest
+// eta of its children (0 if it has none).
+inline float Eta(const float* t, int p, int d, float worst) {
+  const double w = static_cast<double>(t[p]) - 0.5 * (static_cast<double>(t[p + d]) + t[p - d]);
+  return RoundUp(std::fabs(w) + worst);
+}
+
+inline bool IsFinite(float v) {
+  uint32_t bits;
+  std::memcpy(&bits, &v, sizeof(bits));
+  return (bits & 0x7f800000u) != 0x7f800000u;
 }
 
 }  // namespace
 
 class HierarchyBuilder {
  public:
-  // Linear arrays, x fastest: the stencils below are fixed offsets there.
-  HierarchyBuilder(int k, const float* f, float* eta)
-      : f_(f), eta_(eta), k_(k), n_((1 << k) + 1), last_(1 << k) {}
+  // `samples`: the linear (x fastest) cube, consumed (cube centres' float eta overwrite their
+  // samples, see the top). `h`: laid out (SetUpStore), bricks not yet written.
+  HierarchyBuilder(int k, float* samples, Hierarchy* h)
+      : s_(samples),
+        bricks_(h->bricks_.data()),
+        offset_{h->axis_offset_[0].data(), h->axis_offset_[1].data(), h->axis_offset_[2].data()},
+        k_(k),
+        n_((1 << k) + 1),
+        last_(1 << k) {}
 
-  void Run(const HierarchyBuildOptions& options) {
+  // False if a sample is not finite (then eta is meaningless and the build is abandoned).
+  bool Run(const HierarchyBuildOptions& options) {
     const size_t total = size_t(n_) * n_ * n_;
-    // Every point but the 8 corners is written by exactly one pass (first touch in parallel).
-    for (int c = 0; c < 8; ++c)
-      eta_[((c & 4) ? last_ : 0) * size_t(n_) * n_ + ((c & 2) ? last_ : 0) * size_t(n_) +
-           ((c & 1) ? last_ : 0)] = 0;
-    size_t done = 0;
+    const bool report = options.progress && total > (size_t{1} << 24);
+    size_t left = total;  // points of scale >= h (and the 8 corners)
     for (int h = 0; h < k_; ++h) {
-      for (DiamondKind kind : {DiamondKind::kEdge, DiamondKind::kFace, DiamondKind::kCube}) {
-        for (int mask = 1; mask < 8; ++mask) {
-          if (3 - __builtin_popcount(static_cast<unsigned>(mask)) != static_cast<int>(kind))
-            continue;
-          done += Pass(h, mask, kind);
-        }
+      if (h == 0) {
+        if (!ForEachTile(0, [&](int tx, int ty, int tz) { return FinestTile(tx, ty, tz); }))
+          return false;
+      } else {
+        ForEachTile(h, [&](int tx, int ty, int tz) { return CoarseTile(h, tx, ty, tz); });
       }
-      if (options.progress && total > (size_t{1} << 24))
-        options.progress(std::min(0.99, static_cast<double>(done) / total));
+      const size_t side = size_t(last_ >> (h + 1)) + 1;
+      left = side * side * side;
+      if (report) options.progress(std::min(0.99, static_cast<double>(total - left) / total));
     }
-    if (options.progress && total > (size_t{1} << 24)) options.progress(1.0);
+    if (report) options.progress(1.0);
+    return true;
   }
 
  private:
-  // One sub-lattice: points of scale h whose odd axes are `mask`. Returns the point count.
-  size_t Pass(int h, int mask, DiamondKind kind) {
-    switch (mask) {
-      case 1:
-        return PassT<1>(h, kind);
-      case 2:
-        return PassT<2>(h, kind);
-      case 3:
-        return PassT<3>(h, kind);
-      case 4:
-        return PassT<4>(h, kind);
-      case 5:
-        return PassT<5>(h, kind);
-      case 6:
-        return PassT<6>(h, kind);
-      default:
-        return PassT<7>(h, kind);
-    }
+  static constexpr int kT = 9;                   // tile side in lattice points
+  static constexpr int kTY = kT, kTZ = kT * kT;  // tile strides
+  static constexpr int kQ = kT + 1;              // edge-children tile side
+  static constexpr int kQY = kQ, kQZ = kQ * kQ;
+  static_assert(HierarchyBrick::kMask + 1 == kT - 1, "scale-0 tiles are bricks");
+  static constexpr int kAhead = 3 * (kT - 1);  // prefetch distance in lattice points
+
+  // Scale h's lattice (spacing u = 2^h) cut into tiles of 8^3 cells, in parallel; tile rows
+  // along x stay on one thread (consecutive in memory).
+  template <typename F>
+  bool ForEachTile(int h, F&& tile) {
+    const int cells = last_ >> h;            // lattice cells per axis
+    const int tiles = cells / (kT - 1) + 1;  // tiles per axis (each owns 8 points of it)
+    std::atomic<bool> all_ok{true};
+    auto rows = [&](const tbb::blocked_range<int>& r) {
+      bool ok = true;
+      for (int zy = r.begin(); zy != r.end(); ++zy)
+        for (int tx = 0; tx < tiles; ++tx) ok &= tile(tx, zy % tiles, zy / tiles);
+      if (!ok) all_ok.store(false, std::memory_order_relaxed);
+    };
+    tbb::parallel_for(tbb::blocked_range<int>(0, tiles * tiles), rows);
+    return all_ok.load();
   }
 
-  // Specialised per odd-axis mask so the inner loop is a fixed stencil over plain arrays.
-  // Along an odd axis the sign of the refinement edge alternates with the lattice index
-  // (coordinates u, 3u, 5u, ... are 1, 3, 1, ... mod 4 in units of u).
-  template <int kMask>
-  size_t PassT(int h, DiamondKind kind) {
-    constexpr bool kOdd[3] = {(kMask & 1) != 0, (kMask & 2) != 0, (kMask & 4) != 0};
-    const int u = 1 << h, step = 2 * u;
-    int start[3], count[3];
-    for (int a = 0; a < 3; ++a) {
-      start[a] = kOdd[a] ? u : 0;
-      count[a] = kOdd[a] ? (last_ >> (h + 1)) : (last_ >> (h + 1)) + 1;
+  // The diamonds of one scale inside a tile: the 9^3 lattice points t (samples; the last
+  // plane on each axis is the next tile's first, clipped to the cube: c[] points per axis),
+  // eta e of the points with an odd lattice coordinate. Cube sizes are odd and tiles start at
+  // multiples of 8 lattice cells, so the c[] are odd: every odd coordinate has both lattice
+  // neighbours in the tile, and a diamond's refinement-edge ends and its edge/face/cube
+  // children are such neighbours. Tile coordinates are congruent to lattice ones mod 8, so
+  // the edge directions (EvenEndSign) read the same. Edge centres' children (kEdgeChildren,
+  // scales >= 1) are the previous scale's cube centres half a cell away on every axis: q
+  // holds them at half-coordinates -1/2 .. 8 + 1/2, 0 outside the cube (eta >= 0, so that
+  // is the same as leaving them out).
+  template <bool kEdgeChildren>
+  static void TileEta(const int c[3], const float* t, const float* q, float* e) {
+    if (c[0] == kT && c[1] == kT && c[2] == kT) {
+      TileEtaT<kEdgeChildren, true>(c, t, q, e);  // constant bounds: unrolled
+    } else {
+      TileEtaT<kEdgeChildren, false>(c, t, q, e);
     }
-    const float* f = f_;
-    float* eta = eta_;
-    const ptrdiff_t sy = n_, sz = static_cast<ptrdiff_t>(n_) * n_;
-    const ptrdiff_t stride[3] = {1, sy, sz};
-
-    // Children that need no bounds check: cube and face centres only have children inside
-    // their own cell. Edge centres (h > 0) have 8 diagonal children, some of which fall outside
-    // the domain when the edge lies on the boundary; those points take the checked path.
-    ptrdiff_t child[8];
-    int child_count = 0;
-    if (kind == DiamondKind::kCube || kind == DiamondKind::kFace) {
-      for (int a = 0; a < 3; ++a)
-        if (kind == DiamondKind::kCube || kOdd[a]) {
-          child[child_count++] = u * stride[a];
-          child[child_count++] = -u * stride[a];
+  }
+  template <bool kEdgeChildren, bool kFull>
+  static void TileEtaT(const int c[3], const float* t, const float* q, float* e) {
+    auto sign = [](int v) { return ((v & 3) == 3) ? 1 : -1; };  // EvenEndSign, lattice units
+    auto edge_children = [q](int x, int y, int z) {
+      if (!kEdgeChildren) return 0.0f;
+      const float* b = q + z * kQZ + y * kQY + x;  // children at b + {0,1} x {0,kQY} x {0,kQZ}
+      return std::max(
+          std::max(std::max(b[0], b[1]), std::max(b[kQY], b[kQY + 1])),
+          std::max(std::max(b[kQZ], b[kQZ + 1]), std::max(b[kQZ + kQY], b[kQZ + kQY + 1])));
+    };
+    const int cx = kFull ? kT : c[0], cy = kFull ? kT : c[1], cz = kFull ? kT : c[2];
+    // Edge centres: one odd coordinate.
+    for (int z = 0; z < cz; z += 2)
+      for (int y = 0; y < cy; y += 2) {
+        for (int x = 1; x < cx; x += 2) {
+          const int p = z * kTZ + y * kTY + x;
+          e[p] = Eta(t, p, 1, edge_children(x, y, z));
         }
-    } else if (h > 0) {
-      const int half = u / 2;
-      for (int s = 0; s < 8; ++s)
-        child[child_count++] = ((s & 1) ? half : -half) + ((s & 2) ? half : -half) * sy +
-                               ((s & 4) ? half : -half) * sz;
-    }
-    const bool edge_children = kind == DiamondKind::kEdge && h > 0;
-
-    const int rows = count[1] * count[2];
-    tbb::parallel_for(tbb::blocked_range<int>(0, rows, 16), [&](const tbb::blocked_range<int>& r) {
-      for (int row = r.begin(); row != r.end(); ++row) {
-        const int iy = row % count[1], iz = row / count[1];
-        const int y = start[1] + iy * step, z = start[2] + iz * step;
-        ptrdiff_t edge_yz = 0;
-        if (kOdd[1]) edge_yz += EvenEndSign(y, h) * u * sy;
-        if (kOdd[2]) edge_yz += EvenEndSign(z, h) * u * sz;
-        const bool row_on_boundary = edge_children && ((!kOdd[1] && (y == 0 || y == last_)) ||
-                                                       (!kOdd[2] && (z == 0 || z == last_)));
-        ptrdiff_t p = start[0] + y * sy + z * sz;
-        for (int ix = 0; ix < count[0]; ++ix, p += step) {
-          const ptrdiff_t e = kOdd[0] ? edge_yz + ((ix & 1) ? u : -u) : edge_yz;
-          const double w =
-              static_cast<double>(f[p]) - 0.5 * (static_cast<double>(f[p + e]) + f[p - e]);
-          float worst = 0.0f;
-          const bool checked =
-              row_on_boundary || (edge_children && !kOdd[0] && (ix == 0 || ix == count[0] - 1));
-          if (checked) {
-            const int c[3] = {start[0] + ix * step, y, z};
-            worst = EdgeChildren(c, h, p, eta, stride);
-          } else {
-            for (int i = 0; i < child_count; ++i) worst = std::max(worst, eta[p + child[i]]);
+        if (y + 1 < cy)
+          for (int x = 0; x < cx; x += 2) {
+            const int p = z * kTZ + (y + 1) * kTY + x;
+            e[p] = Eta(t, p, kTY, edge_children(x, y + 1, z));
           }
-          eta[p] = RoundUp(std::fabs(w) + worst);
+        if (z + 1 < cz)
+          for (int x = 0; x < cx; x += 2) {
+            const int p = (z + 1) * kTZ + y * kTY + x;
+            e[p] = Eta(t, p, kTZ, edge_children(x, y, z + 1));
+          }
+      }
+    // Face centres: two odd coordinates; children the 4 edge centres one point along them.
+    for (int z = 0; z < cz; ++z)
+      for (int y = 0; y < cy; ++y) {
+        const int zo = z & 1, yo = y & 1;
+        if (zo && yo) {  // x even
+          const int d = sign(y) * kTY + sign(z) * kTZ;
+          for (int x = 0; x < cx; x += 2) {
+            const int p = z * kTZ + y * kTY + x;
+            e[p] =
+                Eta(t, p, d,
+                    std::max(std::max(e[p - kTY], e[p + kTY]), std::max(e[p - kTZ], e[p + kTZ])));
+          }
+        } else if (zo || yo) {  // x odd, and one of y, z
+          const int a = yo ? kTY : kTZ;
+          const int da = yo ? sign(y) * kTY : sign(z) * kTZ;
+          for (int x = 1; x < cx; x += 2) {
+            const int p = z * kTZ + y * kTY + x;
+            e[p] = Eta(t, p, sign(x) + da,
+                       std::max(std::max(e[p - 1], e[p + 1]), std::max(e[p - a], e[p + a])));
+          }
         }
       }
-    });
-    return static_cast<size_t>(count[0]) * count[1] * count[2];
+    // Cube centres: all odd (never on the shared last plane); children the 6 face centres.
+    for (int z = 1; z < cz; z += 2)
+      for (int y = 1; y < cy; y += 2)
+        for (int x = 1; x < cx; x += 2) {
+          const int p = z * kTZ + y * kTY + x;
+          const float worst =
+              std::max(std::max(std::max(e[p - 1], e[p + 1]), std::max(e[p - kTY], e[p + kTY])),
+                       std::max(e[p - kTZ], e[p + kTZ]));
+          e[p] = Eta(t, p, sign(x) + sign(y) * kTY + sign(z) * kTZ, worst);
+        }
   }
 
-  float EdgeChildren(const int c[3], int h, ptrdiff_t p, const float* eta,
-                     const ptrdiff_t stride[3]) const {
-    const int half = 1 << (h - 1);
-    float worst = 0.0f;
-    for (int s = 0; s < 8; ++s) {
-      ptrdiff_t off = 0;
-      bool inside = true;
-      for (int a = 0; a < 3; ++a) {
-        const int d = (s >> a) & 1 ? half : -half;
-        const int q = c[a] + d;
-        inside &= q >= 0 && q <= last_;
-        off += d * stride[a];
+  // Scale 0: a tile is a brick plus the next brick's first plane on each axis. Writes the
+  // brick whole (samples, scale-0 eta, 0 for coarser points, whose eta comes later, and for
+  // points beyond the cube, which are never read but keep the store deterministic) and
+  // leaves the cube centres' float eta in the linear array for scale 1's edge centres.
+  bool FinestTile(int bx, int by, int bz) {
+    const int x0 = bx * (kT - 1), y0 = by * (kT - 1), z0 = bz * (kT - 1);
+    const int c[3] = {std::min(kT, n_ - x0), std::min(kT, n_ - y0), std::min(kT, n_ - z0)};
+    HierarchyBrick* brick = &bricks_[(size_t(bz) * brick_count() + by) * brick_count() + bx];
+    float* s = s_ + (size_t(z0) * n_ + y0) * n_ + x0;
+    if (c[0] == kT && c[1] == kT && c[2] == kT) return FinestTileT<true>(c, s, brick);
+    return FinestTileT<false>(c, s, brick);
+  }
+  template <bool kFull>
+  bool FinestTileT(const int c[3], float* s, HierarchyBrick* brick) {
+    alignas(64) float t[kT * kT * kT];
+    alignas(64) float e[kT * kT * kT];
+    const size_t sy = size_t(n_), sz = size_t(n_) * n_;
+    const int cx = kFull ? kT : c[0], cy = kFull ? kT : c[1], cz = kFull ? kT : c[2];
+    // The tile's rows continue the previous tile's: too many streams for the hardware
+    // prefetcher, so fetch ahead for the tile after next.
+    const float* end = s_ + size_t(n_) * sz;
+    for (int z = 0; z < cz; ++z)
+      for (int y = 0; y < cy; ++y) {
+        const float* row = s + z * sz + y * sy;
+        std::memcpy(t + z * kTZ + y * kTY, row, sizeof(float) * cx);
+        if (end - row > kAhead) __builtin_prefetch(row + kAhead);
       }
-      if (inside) worst = std::max(worst, eta[p + off]);
-    }
-    return worst;
+    TileEtaT<false, kFull>(c, t, nullptr, e);
+
+    constexpr int kB = kT - 1;
+    const int bxn = std::min(kB, cx), byn = std::min(kB, cy), bzn = std::min(kB, cz);
+    bool ok = true;
+    for (int z = 0; z < kB; ++z)
+      for (int y = 0; y < kB; ++y) {
+        float* value = brick->value + (z * kB + y) * kB;
+        uint16_t* eta = brick->eta + (z * kB + y) * kB;
+        const int p = z * kTZ + y * kTY;
+        const int inside = z < bzn && y < byn ? bxn : 0;
+        for (int x = 0; x < inside; ++x) {
+          value[x] = t[p + x];
+          ok &= IsFinite(t[p + x]);
+        }
+        for (int x = inside; x < kB; ++x) value[x] = 0.0f;
+        if ((z | y) & 1) {  // every x is scale 0
+          for (int x = 0; x < inside; ++x) eta[x] = EncodeEtaRoundingUp(e[p + x]);
+        } else {  // odd x only
+          for (int x = 0; x < inside; ++x) eta[x] = x & 1 ? EncodeEtaRoundingUp(e[p + x]) : 0;
+        }
+        for (int x = inside; x < kB; ++x) eta[x] = 0;
+        if (z & y & 1)
+          for (int x = 1; x < inside; x += 2) s[z * sz + y * sy + x] = e[p + x];
+      }
+    return ok;
   }
 
-  const float* f_;
-  float* eta_;
+  // Scale h >= 1: gathers the tile's lattice samples and the previous scale's cube centres
+  // from the linear array, stores the scale's bfloat16 eta into the bricks and its cube
+  // centres' float eta into the linear array.
+  bool CoarseTile(int h, int tx, int ty, int tz) {
+    const int u = 1 << h, half = u / 2;
+    const int o[3] = {tx * (kT - 1) * u, ty * (kT - 1) * u, tz * (kT - 1) * u};  // origin
+    int c[3], cq[3];
+    for (int a = 0; a < 3; ++a) {
+      c[a] = std::min(kT, ((last_ - o[a]) >> h) + 1);
+      cq[a] = c[a] + 1;  // children at half-coordinates -1/2 .. c - 1/2
+    }
+    const size_t sy = size_t(n_), sz = size_t(n_) * n_;
+    alignas(64) float t[kT * kT * kT];
+    alignas(64) float e[kT * kT * kT];
+    alignas(64) float q[kQ * kQ * kQ];
+    // Prefetch as in FinestTile: the lattice points kAhead .. kAhead + 8 of each row, one per
+    // cache line (16 floats).
+    const int ahead = o[0] + (kAhead + kT - 1) * u <= last_ ? std::max(1, 16 / u) : 0;
+    for (int z = 0; z < c[2]; ++z)
+      for (int y = 0; y < c[1]; ++y) {
+        const float* row = s_ + size_t(o[2] + z * u) * sz + size_t(o[1] + y * u) * sy + o[0];
+        for (int x = 0; x < c[0]; ++x) t[z * kTZ + y * kTY + x] = row[x * u];
+        if (ahead)
+          for (int x = 0; x < kT; x += ahead) __builtin_prefetch(row + (kAhead + x) * u);
+      }
+    int qx0[kQ];  // x of child column i, or -1 outside the cube
+    for (int i = 0; i < cq[0]; ++i) {
+      const int x = o[0] + i * u - half;
+      qx0[i] = x >= 0 && x <= last_ ? x : -1;
+    }
+    for (int z = 0; z < cq[2]; ++z)
+      for (int y = 0; y < cq[1]; ++y) {
+        float* dst = q + z * kQZ + y * kQY;
+        const int cy = o[1] + y * u - half, cz = o[2] + z * u - half;
+        if (cy < 0 || cy > last_ || cz < 0 || cz > last_) {
+          std::fill(dst, dst + cq[0], 0.0f);
+          continue;
+        }
+        const float* row = s_ + size_t(cz) * sz + size_t(cy) * sy;
+        for (int x = 0; x < cq[0]; ++x) dst[x] = qx0[x] >= 0 ? row[qx0[x]] : 0.0f;
+        if (ahead)
+          for (int x = 0; x < kT; x += ahead)
+            __builtin_prefetch(row + o[0] + (kAhead + x) * u - half);
+      }
+    TileEta<true>(c, t, q, e);
+
+    // This tile's points: lattice coordinates 0..7 (the last plane is the next tile's).
+    const int own[3] = {std::min(kT - 1, c[0]), std::min(kT - 1, c[1]), std::min(kT - 1, c[2])};
+    HierarchyBrick* bricks = bricks_;
+    for (int z = 0; z < own[2]; ++z)
+      for (int y = 0; y < own[1]; ++y) {
+        const int gy = o[1] + y * u, gz = o[2] + z * u;
+        const uint32_t oyz = offset_[1][gy] + offset_[2][gz];
+        const int p = z * kTZ + y * kTY;
+        const bool yz_odd = (y | z) & 1;
+        for (int x = yz_odd ? 0 : 1; x < own[0]; x += yz_odd ? 1 : 2) {
+          const uint32_t i = offset_[0][o[0] + x * u] + oyz;
+          bricks[i >> (3 * HierarchyBrick::kLog2)].eta[i & (HierarchyBrick::kPoints - 1)] =
+              EncodeEtaRoundingUp(e[p + x]);
+        }
+        if (z & y & 1) {
+          float* row = s_ + size_t(gz) * sz + size_t(gy) * sy + o[0];
+          for (int x = 1; x < own[0]; x += 2) row[x * u] = e[p + x];
+        }
+      }
+    return true;
+  }
+
+  int brick_count() const { return (n_ + HierarchyBrick::kMask) >> HierarchyBrick::kLog2; }
+
+  float* s_;
+  HierarchyBrick* bricks_;
+  const uint32_t* offset_[3];
   int k_, n_, last_;
 };
 
@@ -220,32 +388,50 @@ std::vector<float> Hierarchy::LinearEta() const {
   return out;
 }
 
-absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
-                                               const UninitializedVector<float>& eta) {
+UninitializedVector<uint16_t> Hierarchy::LinearEtaCodes() const {
+  UninitializedVector<uint16_t> out(point_count());
+  ForEachRow([&](int y, int z, size_t row) {
+    for (int x = 0; x < n_; ++x) {
+      const size_t i = index(x, y, z);
+      out[row + x] = bricks_[i >> 9].eta[i & 511];
+    }
+  });
+  return out;
+}
+
+absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
   const size_t n = static_cast<size_t>(samples.n);
   if (samples.k < 1 || samples.k > 12 || samples.n != (1 << samples.k) + 1 ||
       samples.values.size() != n * n * n)
     return absl::InvalidArgumentError("hierarchy: samples are not a (2^k+1)^3 cube");
-  if (eta.size() != samples.values.size())
-    return absl::InvalidArgumentError("hierarchy: eta size does not match the samples");
-  auto h = std::make_shared<Hierarchy>();
-  h->k_ = samples.k;
-  h->n_ = samples.n;
-  h->data_dims_ = samples.data_dims;
+  k_ = samples.k;
+  n_ = samples.n;
+  data_dims_ = samples.data_dims;
   const size_t nb = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;  // bricks per axis
   constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
   for (int a = 0; a < 3; ++a) {
     const size_t brick_stride = a == 0 ? 1 : a == 1 ? nb : nb * nb;
-    h->axis_offset_[a].resize(n);
+    axis_offset_[a].resize(n);
     for (size_t c = 0; c < n; ++c)
-      h->axis_offset_[a][c] =
-          uint32_t((((c >> b) * brick_stride) << (3 * b)) | ((c & m) << (a * b)));
+      axis_offset_[a][c] = uint32_t((((c >> b) * brick_stride) << (3 * b)) | ((c & m) << (a * b)));
   }
-  h->bricks_.resize(nb * nb * nb);
-  AdviseHugePages(h->bricks_.data(), h->bricks_.size() * sizeof(HierarchyBrick));
+  bricks_.resize(nb * nb * nb);  // not initialised: the builder or the assembly writes all
+  AdviseHugePages(bricks_.data(), bricks_.size() * sizeof(HierarchyBrick));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
+                                               const UninitializedVector<uint16_t>& eta_codes) {
+  auto h = std::make_shared<Hierarchy>();
+  ISOSTREAM_RETURN_IF_ERROR(h->SetUpStore(samples));
+  if (eta_codes.size() != samples.values.size())
+    return absl::InvalidArgumentError("hierarchy: eta size does not match the samples");
   // Fill brick by brick (each written once, whole, by one thread, which also first-touches
   // its pages). Points of partial bricks beyond the cube are never read; they get zeros so
   // the store is deterministic.
+  const size_t n = static_cast<size_t>(samples.n);
+  const size_t nb = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
+  constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
   HierarchyBrick* bricks = h->bricks_.data();
   const int cube = samples.n;
   tbb::parallel_for(
@@ -263,7 +449,7 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
                 const size_t row = (size_t(z) * n + y) * n + x0;
                 for (int lx = 0; lx < inside; ++lx) {
                   brick.value[local + lx] = samples.values[row + lx];
-                  brick.eta[local + lx] = EncodeEtaRoundingUp(eta[row + lx]);
+                  brick.eta[local + lx] = eta_codes[row + lx];
                 }
                 for (int lx = inside; lx <= m; ++lx) {
                   brick.value[local + lx] = 0.0f;
@@ -278,24 +464,14 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
 
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options) {
-  const size_t n = static_cast<size_t>(samples.n);
-  if (samples.k < 1 || samples.k > 12 || samples.n != (1 << samples.k) + 1 ||
-      samples.values.size() != n * n * n)
-    return absl::InvalidArgumentError("hierarchy: samples are not a (2^k+1)^3 cube");
-  const bool finite = tbb::parallel_reduce(
-      tbb::blocked_range<size_t>(0, samples.values.size()), true,
-      [&](const tbb::blocked_range<size_t>& r, bool ok) {
-        for (size_t i = r.begin(); ok && i != r.end(); ++i) ok = std::isfinite(samples.values[i]);
-        return ok;
-      },
-      [](bool a, bool b) { return a && b; });
-  if (!finite) return absl::InvalidArgumentError("hierarchy: non-finite sample");
-  UninitializedVector<float> eta(samples.values.size());
-  AdviseHugePages(eta.data(), eta.size() * sizeof(float));
+  auto h = std::make_shared<Hierarchy>();
+  ISOSTREAM_RETURN_IF_ERROR(h->SetUpStore(samples));
   tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
-  HierarchyBuilder builder(samples.k, samples.values.data(), eta.data());
-  arena.execute([&] { builder.Run(options); });
-  return AssembleHierarchy(std::move(samples), eta);
+  HierarchyBuilder builder(samples.k, samples.values.data(), h.get());
+  bool finite = true;
+  arena.execute([&] { finite = builder.Run(options); });
+  if (!finite) return absl::InvalidArgumentError("hierarchy: non-finite sample");
+  return HierarchyPtr(std::move(h));
 }
 
 }  // namespace isostream

@@ -60,6 +60,8 @@ struct HierarchyBrick {
   uint16_t eta[kPoints];
 };
 
+struct HierarchyBuildOptions;
+
 class Hierarchy {
  public:
   int k() const { return k_; }
@@ -81,17 +83,25 @@ class Hierarchy {
   float sample(int x, int y, int z) const { return sample_at(index(x, y, z)); }
   float eta(int x, int y, int z) const { return eta_at(index(x, y, z)); }
 
-  // Linear (x fastest) copies, for tests and tools.
+  // Linear (x fastest) copies, for tests and tools; LinearEtaCodes: the stored bfloat16
+  // codes (what the on-disk cache keeps).
   std::vector<float> LinearSamples() const;
   std::vector<float> LinearEta() const;
+  UninitializedVector<uint16_t> LinearEtaCodes() const;
 
   // Memory: eta's share and the whole store (bricks pad n up to a multiple of 8).
   size_t eta_bytes() const { return bricks_.size() * sizeof(HierarchyBrick::eta); }
   size_t total_bytes() const { return bricks_.size() * sizeof(HierarchyBrick); }
 
  private:
+  friend class HierarchyBuilder;
+  friend absl::StatusOr<std::shared_ptr<const Hierarchy>> BuildHierarchy(
+      PaddedSamples samples, const HierarchyBuildOptions& options);
   friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(
-      PaddedSamples samples, const UninitializedVector<float>& eta);
+      PaddedSamples samples, const UninitializedVector<uint16_t>& eta_codes);
+  // Checks the cube's shape, sets the sizes and offset tables, allocates (does not fill) the
+  // bricks.
+  absl::Status SetUpStore(const PaddedSamples& samples);
   template <typename F>
   void ForEachRow(F&& f) const;
 
@@ -110,13 +120,14 @@ struct HierarchyBuildOptions {
   std::function<void(double)> progress;
 };
 
-// Builds eta from the padded samples (taken over). Fails only on invalid samples.
+// Builds eta from the padded samples (taken over: the build uses their array as scratch).
+// Fails only on invalid samples. Allocates nothing large beyond the bricks it returns.
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options = {});
 
-// Builds the hierarchy's store from linear samples and linear eta (computed by
-// BuildHierarchy, or read from the on-disk cache). Sizes must match.
+// Builds the hierarchy's store from linear samples and the linear bfloat16 eta codes of a
+// previous build (Hierarchy::LinearEtaCodes, as kept by the on-disk cache). Sizes must match.
 absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
-                                               const UninitializedVector<float>& eta);
+                                               const UninitializedVector<uint16_t>& eta_codes);
 
 }  // namespace isostream

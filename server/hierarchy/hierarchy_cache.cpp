@@ -38,9 +38,9 @@ uint64_t SamplesHash(const PaddedSamples& s) {
   return h;
 }
 
-// Reads the cached eta, or explains why it cannot be used.
+// Reads the cached eta (bfloat16 codes, linear), or explains why it cannot be used.
 bool ReadCache(const std::string& path, const PaddedSamples& s, uint64_t samples_hash,
-               UninitializedVector<float>* eta, std::string* why) {
+               UninitializedVector<uint16_t>* eta, std::string* why) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     *why = "no cache entry";
@@ -67,11 +67,11 @@ bool ReadCache(const std::string& path, const PaddedSamples& s, uint64_t samples
     return false;
   }
   eta->resize(count);
-  if (!in.read(reinterpret_cast<char*>(eta->data()), count * sizeof(float))) {
+  if (!in.read(reinterpret_cast<char*>(eta->data()), count * sizeof(uint16_t))) {
     *why = "cache payload truncated";
     return false;
   }
-  if (XXH3_64bits(eta->data(), count * sizeof(float)) != h.eta_hash) {
+  if (XXH3_64bits(eta->data(), count * sizeof(uint16_t)) != h.eta_hash) {
     *why = "cache payload fails its checksum";
     return false;
   }
@@ -92,12 +92,12 @@ bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples
     h.n = static_cast<uint32_t>(hier.n());
     for (int a = 0; a < 3; ++a) h.data_dims[a] = hier.data_dims()[a];
     h.samples_hash = samples_hash;
-    const std::vector<float> eta = hier.LinearEta();
+    const UninitializedVector<uint16_t> eta = hier.LinearEtaCodes();
     h.eta_count = eta.size();
-    h.eta_hash = XXH3_64bits(eta.data(), eta.size() * sizeof(float));
+    h.eta_hash = XXH3_64bits(eta.data(), eta.size() * sizeof(uint16_t));
     out.write(reinterpret_cast<const char*>(&h), sizeof(h));
     out.write(reinterpret_cast<const char*>(eta.data()),
-              static_cast<std::streamsize>(eta.size() * sizeof(float)));
+              static_cast<std::streamsize>(eta.size() * sizeof(uint16_t)));
     if (!out.flush()) {
       *why = "cannot write cache file " + tmp + ": " + std::strerror(errno);
       std::filesystem::remove(tmp, ec);
@@ -160,7 +160,7 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   }
   const uint64_t hash = SamplesHash(samples);
   const std::string path = PathFor(cache.dir, samples.k, hash);
-  UninitializedVector<float> eta;
+  UninitializedVector<uint16_t> eta;
   if (ReadCache(path, samples, hash, &eta, &reason)) {
     if (outcome) *outcome = CacheOutcome::kHit;
     if (why) *why = "loaded " + path;

@@ -1,10 +1,12 @@
 // On-disk cache of built hierarchies, so a restart does not rebuild.
 //
-// A cache file holds eta for one set of padded samples. It is keyed by a hash of the samples
-// (so any change to the source, the padding or the generator makes the entry stale), carries a
-// format version, and ends with a checksum of the payload. A file that is stale, truncated,
-// from another version or fails its checksum is ignored and replaced by a fresh build;
-// writes go to a temporary file renamed into place, so readers never see half a file.
+// A cache file holds eta for one set of padded samples as the hierarchy stores it: bfloat16
+// codes, linear (x fastest), 2 bytes per point (format version 2; version 1 held float eta,
+// 4 bytes per point). It is keyed by a hash of the samples (so any change to the source, the
+// padding or the generator makes the entry stale) and carries a format version and a checksum
+// of the payload. A file that is stale, truncated, from another version or fails its checksum
+// is ignored and replaced by a fresh build; writes go to a temporary file renamed into place,
+// so readers never see half a file.
 #pragma once
 
 #include <string>
@@ -35,6 +37,6 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
 // The path a given sample set is cached under (for tests and `isostream info`).
 std::string HierarchyCachePath(const std::string& dir, const PaddedSamples& samples);
 
-inline constexpr uint32_t kHierarchyCacheVersion = 1;
+inline constexpr uint32_t kHierarchyCacheVersion = 2;
 
 }  // namespace isostream

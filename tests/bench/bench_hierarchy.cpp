@@ -2,6 +2,8 @@
 //   build/tests/bench/bench_hierarchy --benchmark_counters_tabular=true
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+#include <chrono>
 #include <map>
 
 #include "server/hierarchy/hierarchy.h"
@@ -28,18 +30,27 @@ void BM_BuildHierarchy(benchmark::State& state) {
   options.threads = int(state.range(1));
   const PaddedSamples& source = Cayley(n);
   size_t eta_bytes = 0, points = 0;
+  double best_s = 1e30;
   for (auto _ : state) {
     state.PauseTiming();
     PaddedSamples copy = source;
     state.ResumeTiming();
-    auto h = BuildHierarchy(std::move(copy), options);
-    benchmark::DoNotOptimize(h);
-    eta_bytes = (*h)->eta_bytes();
-    points = (*h)->point_count();
+    const auto t0 = std::chrono::steady_clock::now();
+    {
+      auto h = BuildHierarchy(std::move(copy), options);
+      benchmark::DoNotOptimize(h);
+      eta_bytes = (*h)->eta_bytes();
+      points = (*h)->point_count();
+    }
+    best_s = std::min(
+        best_s, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
   state.SetItemsProcessed(int64_t(state.iterations()) * int64_t(points));
   state.counters["Mvoxel/s"] =
       benchmark::Counter(double(points) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  // The fastest iteration: on a VM the first touch of memory the host has not backed yet costs
+  // 10-20x a warm one (see BENCHMARKS.md), and the mean mixes both.
+  state.counters["best_Mvoxel/s"] = double(points) / 1e6 / best_s;
   state.counters["eta_B/voxel"] = double(eta_bytes) / double(points);
 }
 BENCHMARK(BM_BuildHierarchy)

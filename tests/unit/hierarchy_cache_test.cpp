@@ -56,6 +56,20 @@ TEST_F(HierarchyCacheTest, MissThenHitWithIdenticalEta) {
   EXPECT_EQ(a->LinearSamples(), b->LinearSamples());
 }
 
+// The file keeps the stored bfloat16 codes (2 bytes per point, plus a small header), and a hit
+// returns exactly the codes that were built.
+TEST_F(HierarchyCacheTest, FileHoldsTheStoredCodes) {
+  CacheOutcome outcome;
+  const HierarchyPtr a = Get(Samples(5, 0), &outcome);
+  const std::string path = HierarchyCachePath(cache_.dir, Samples(5, 0));
+  const uintmax_t payload = uintmax_t(a->point_count()) * sizeof(uint16_t);
+  EXPECT_GE(fs::file_size(path), payload);
+  EXPECT_LT(fs::file_size(path), payload + 256);
+  const HierarchyPtr b = Get(Samples(5, 0), &outcome);
+  EXPECT_EQ(outcome, CacheOutcome::kHit);
+  EXPECT_EQ(a->LinearEtaCodes(), b->LinearEtaCodes());
+}
+
 TEST_F(HierarchyCacheTest, ChangedSamplesAreNotServedFromCache) {
   CacheOutcome outcome;
   Get(Samples(4, 0), &outcome);

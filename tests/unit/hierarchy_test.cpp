@@ -95,6 +95,68 @@ TEST(Hierarchy, EtaIsAdditiveSaturationOverTreeChildren) {
   }
 }
 
+// The stored eta, bit for bit, against a straightforward evaluation of its definition over the
+// bisection tree: children and wavelets read off the tree, eta computed in float rounded up
+// (|w| in double plus the children's float eta), finest diamonds first, and only the final
+// value rounded up to bfloat16. Any change to the builder's stencils, pass order, rounding or
+// brick layout that changes a single stored bit fails here, for every cube size from one
+// brick (k = 1..3) to several with partial bricks at the far faces (k = 4, 5).
+TEST(Hierarchy, StoredEtaEqualsReferenceRecursionBitForBit) {
+  auto round_up = [](double v) {
+    float f = static_cast<float>(v);
+    if (static_cast<double>(f) < v) f = std::nextafter(f, INFINITY);
+    return f;
+  };
+  for (const auto& vol : TestVolumes()) {
+    for (int k = 1; k <= 5; ++k) {
+      for (int threads : {1, 2}) {
+        const HierarchyPtr h = Build(k, vol, threads);
+        const int n = (1 << k) + 1;
+        auto id = [n](const glm::ivec3& p) { return (size_t(p.z) * n + p.y) * n + p.x; };
+        std::map<size_t, std::set<size_t>> children;
+        std::map<size_t, double> wavelet;
+        std::map<size_t, int> level;
+        WalkTree(k, [&](const TetNode& t) {
+          if (t.level == 3 * k) return false;
+          const size_t x = id(RefinementPoint(t.v));
+          wavelet[x] = std::abs(Wavelet(*h, t));
+          level[x] = t.level;
+          auto& c = children[x];
+          if (t.level + 1 < 3 * k) {
+            const ReferenceTet& rt = ReferenceTets::Get()[t.cls];
+            for (int i = 0; i < 2; ++i) {
+              TetVertices cv;
+              ChildVertices(rt, t.v, i, &cv);
+              c.insert(id(RefinementPoint(cv)));
+            }
+          }
+          return true;
+        });
+        ASSERT_EQ(children.size(), size_t(n) * n * n - 8) << "every point but the corners";
+        std::vector<std::pair<int, size_t>> order;
+        for (const auto& [x, l] : level) order.push_back({-l, x});
+        std::sort(order.begin(), order.end());  // finest level first
+        std::map<size_t, float> eta;
+        for (const auto& [neg_level, x] : order) {
+          float worst = 0;
+          for (size_t c : children[x]) worst = std::max(worst, eta.at(c));
+          eta[x] = round_up(wavelet[x] + worst);
+        }
+        for (int z = 0; z < n; ++z)
+          for (int y = 0; y < n; ++y)
+            for (int x = 0; x < n; ++x) {
+              const size_t i = h->index(x, y, z);
+              const uint16_t stored = h->bricks()[i >> 9].eta[i & 511];
+              const auto it = eta.find(id({x, y, z}));
+              const uint16_t expect = it == eta.end() ? 0 : EncodeEtaRoundingUp(it->second);
+              ASSERT_EQ(stored, expect) << vol.name << " k " << k << " threads " << threads
+                                        << " at " << x << " " << y << " " << z;
+            }
+      }
+    }
+  }
+}
+
 TEST(Hierarchy, SaturationIsMonotoneAlongTheTree) {
   for (const auto& vol : TestVolumes()) {
     const int k = 4;
