@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "server/extract/budget_memo.h"
 #include "server/hierarchy/prepared_volume.h"
 #include "shared/frame_codec.h"
 
@@ -29,6 +30,8 @@ struct ServedVolume {
   QuantizationBox box;
   int position_bits = 14;
   float position_error = 0;  // PositionErrorBound(box, position_bits), world units
+  // The eps each (isovalues, budget) needed: views of one volume share it. Thread-safe.
+  mutable BudgetMemo budget_memo;
 };
 
 using ServedVolumePtr = std::shared_ptr<const ServedVolume>;
