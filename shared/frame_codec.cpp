@@ -70,12 +70,10 @@ absl::Status SealChunk(ChunkCodec codec, bool has_normals, size_t triangle_count
   return absl::OkStatus();
 }
 
-absl::Status EncodeDracoChunk(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
-                              const CodecOptions& options, std::string* out) {
+absl::Status EncodeDracoChunk(const internal::GatheredChunk& chunk, const CodecOptions& options,
+                              std::string* out) {
   ISOSTREAM_RETURN_IF_ERROR(internal::CheckCodecOptions(options));
-  internal::GatheredChunk chunk;
-  ISOSTREAM_RETURN_IF_ERROR(
-      internal::GatherTriangleRange(mesh, first_triangle, triangle_count, &chunk));
+  const size_t triangle_count = chunk.triangle_count();
   const bool has_normals = !chunk.normals.empty() && triangle_count > 0;
   out->assign(kChunkHeaderSize, '\0');
   if (triangle_count == 0) {
@@ -112,11 +110,8 @@ absl::Status EncodeDracoChunk(const OrderedMesh& mesh, size_t first_triangle, si
   return SealChunk(codec, has_normals, triangle_count, chunk.vertex_count(), out);
 }
 
-absl::Status EncodeRawChunk(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
-                            std::string* out) {
-  internal::GatheredChunk chunk;
-  ISOSTREAM_RETURN_IF_ERROR(
-      internal::GatherTriangleRange(mesh, first_triangle, triangle_count, &chunk));
+absl::Status EncodeRawChunk(const internal::GatheredChunk& chunk, std::string* out) {
+  const size_t triangle_count = chunk.triangle_count();
   const bool has_normals = !chunk.normals.empty() && triangle_count > 0;
   const size_t vertex_count = chunk.vertex_count();
   out->assign(kChunkHeaderSize + RawPayloadSize(vertex_count, triangle_count, has_normals), '\0');
@@ -361,14 +356,56 @@ absl::StatusOr<ChunkHeader> ReadChunkHeader(const char* data, size_t size) {
 
 absl::Status EncodeChunk(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
                          const CodecOptions& options, std::string* out) {
-  return GuardEncode(
-      out, [&] { return EncodeDracoChunk(mesh, first_triangle, triangle_count, options, out); });
+  return GuardEncode(out, [&]() -> absl::Status {
+    internal::GatheredChunk chunk;
+    ISOSTREAM_RETURN_IF_ERROR(
+        internal::GatherTriangleRange(mesh, first_triangle, triangle_count, &chunk));
+    return EncodeDracoChunk(chunk, options, out);
+  });
 }
 
 absl::Status EncodeChunkRaw(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
                             std::string* out) {
-  return GuardEncode(out,
-                     [&] { return EncodeRawChunk(mesh, first_triangle, triangle_count, out); });
+  return GuardEncode(out, [&]() -> absl::Status {
+    internal::GatheredChunk chunk;
+    ISOSTREAM_RETURN_IF_ERROR(
+        internal::GatherTriangleRange(mesh, first_triangle, triangle_count, &chunk));
+    return EncodeRawChunk(chunk, out);
+  });
+}
+
+ChunkCopy::ChunkCopy() = default;
+ChunkCopy::~ChunkCopy() = default;
+ChunkCopy::ChunkCopy(ChunkCopy&&) noexcept = default;
+ChunkCopy& ChunkCopy::operator=(ChunkCopy&&) noexcept = default;
+
+size_t ChunkCopy::triangle_count() const { return chunk_ ? chunk_->triangle_count() : 0; }
+
+ChunkCopier::ChunkCopier() : scratch_(std::make_unique<internal::GatherScratch>()) {}
+ChunkCopier::~ChunkCopier() = default;
+
+absl::Status ChunkCopier::Copy(const OrderedMesh& mesh, size_t first_triangle,
+                               size_t triangle_count, ChunkCopy* out) {
+  if (out == nullptr) return absl::InvalidArgumentError("out is null");
+  try {
+    auto chunk = std::make_unique<internal::GatheredChunk>();
+    ISOSTREAM_RETURN_IF_ERROR(internal::GatherTriangleRange(mesh, first_triangle, triangle_count,
+                                                            chunk.get(), scratch_.get()));
+    out->chunk_ = std::move(chunk);
+    return absl::OkStatus();
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError("out of memory while copying a chunk");
+  }
+}
+
+absl::Status EncodeChunk(const ChunkCopy& copy, const CodecOptions& options, std::string* out) {
+  if (!copy.chunk_) return absl::InvalidArgumentError("empty ChunkCopy (nothing was copied)");
+  return GuardEncode(out, [&] { return EncodeDracoChunk(*copy.chunk_, options, out); });
+}
+
+absl::Status EncodeChunkRaw(const ChunkCopy& copy, std::string* out) {
+  if (!copy.chunk_) return absl::InvalidArgumentError("empty ChunkCopy (nothing was copied)");
+  return GuardEncode(out, [&] { return EncodeRawChunk(*copy.chunk_, out); });
 }
 
 absl::Status DecodeChunk(const char* data, size_t size, OrderedMesh* append_to) {

@@ -45,6 +45,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -52,6 +53,11 @@
 #include "shared/status.h"
 
 namespace isostream {
+
+namespace internal {
+struct GatheredChunk;
+struct GatherScratch;
+}  // namespace internal
 
 // The cube [origin, origin + range] on each axis over which positions are quantized.
 struct QuantizationBox {
@@ -154,6 +160,46 @@ absl::Status EncodeChunk(const OrderedMesh& mesh, size_t first_triangle, size_t 
 // plus 13 per triangle, and a memcpy to decode.
 absl::Status EncodeChunkRaw(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
                             std::string* out);
+
+// Two-step encoding, for a producer that must copy a range out of a mesh that keeps changing
+// (the extractor appends to its mesh while a frame streams) and encode it later on another
+// thread. ChunkCopier::Copy does the first half of EncodeChunk: it checks the range as
+// EncodeChunk does and copies its triangles with their own vertices (first-use order, split
+// per surface); EncodeChunk(copy, ...) does the rest. The result is byte-identical to the
+// one-step call. A ChunkCopier keeps a lookup table indexed by mesh vertex across calls, so
+// copying consecutive ranges of a large mesh costs O(range) each, with no per-call table.
+class ChunkCopy {
+ public:
+  ChunkCopy();
+  ~ChunkCopy();
+  ChunkCopy(ChunkCopy&&) noexcept;
+  ChunkCopy& operator=(ChunkCopy&&) noexcept;
+  size_t triangle_count() const;
+
+ private:
+  friend class ChunkCopier;
+  friend absl::Status EncodeChunk(const ChunkCopy&, const CodecOptions&, std::string*);
+  friend absl::Status EncodeChunkRaw(const ChunkCopy&, std::string*);
+  std::unique_ptr<internal::GatheredChunk> chunk_;
+};
+
+class ChunkCopier {
+ public:
+  ChunkCopier();
+  ~ChunkCopier();
+  // Replaces `out` with triangles [first_triangle, first_triangle + triangle_count) of `mesh`.
+  // Errors as EncodeChunk's for the same range; `out` is then unchanged.
+  absl::Status Copy(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
+                    ChunkCopy* out);
+
+ private:
+  std::unique_ptr<internal::GatherScratch> scratch_;
+};
+
+// EncodeChunk and EncodeChunkRaw of a copied range. InvalidArgument for a ChunkCopy that holds
+// no copy.
+absl::Status EncodeChunk(const ChunkCopy& copy, const CodecOptions& options, std::string* out);
+absl::Status EncodeChunkRaw(const ChunkCopy& copy, std::string* out);
 
 // Decodes the chunk in data[0, size) (size must be exactly header + payload) and appends its
 // vertices and triangles to `append_to`, offsetting the indices by the vertex count it had.

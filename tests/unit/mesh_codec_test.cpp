@@ -166,6 +166,43 @@ TEST(MeshCodec, EdgeCacheKeepsCornerOrderOfEveryTriangle) {
   }
 }
 
+TEST(MeshCodec, CopiedRangesEncodeToTheSameBytes) {
+  // One copier over consecutive ranges of a mesh that grows between copies, as the frame
+  // producer uses it, then over another mesh: every chunk equals the one-step encoding.
+  const OrderedMesh full = ShuffledBandedGrid();
+  const OrderedMesh other = Shuffled(MakeSphere(3000), 8);
+  ChunkCopier copier;
+  const size_t cuts[] = {0, 1, 700, 2000, 2001, 6000, full.triangle_count()};
+  OrderedMesh growing;
+  for (size_t i = 0; i + 1 < std::size(cuts); ++i) {
+    // the first cuts[i + 1] triangles, with every vertex of the full mesh
+    growing = full;
+    growing.triangles.resize(3 * cuts[i + 1]);
+    growing.surface.resize(cuts[i + 1]);
+    const size_t count = cuts[i + 1] - cuts[i];
+    ChunkCopy copy;
+    ASSERT_TRUE(copier.Copy(growing, cuts[i], count, &copy).ok());
+    EXPECT_EQ(copy.triangle_count(), count);
+    std::string two_step, raw_two_step;
+    ASSERT_TRUE(EncodeChunk(copy, {}, &two_step).ok());
+    ASSERT_TRUE(EncodeChunkRaw(copy, &raw_two_step).ok());
+    EXPECT_EQ(two_step, Encode(full, cuts[i], count)) << i;
+    EXPECT_EQ(raw_two_step, EncodeRaw(full, cuts[i], count)) << i;
+  }
+  ChunkCopy copy;
+  ASSERT_TRUE(copier.Copy(other, 10, 2500, &copy).ok());
+  std::string two_step;
+  ASSERT_TRUE(EncodeChunk(copy, {}, &two_step).ok());
+  EXPECT_EQ(two_step, Encode(other, 10, 2500));
+  // Errors leave the copy as it was; an empty copy is not encodable.
+  EXPECT_EQ(copier.Copy(other, 10, other.triangle_count(), &copy).code(),
+            absl::StatusCode::kOutOfRange);
+  EXPECT_EQ(copy.triangle_count(), 2500u);
+  ChunkCopy empty;
+  EXPECT_EQ(EncodeChunk(empty, {}, &two_step).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(EncodeChunkRaw(empty, &two_step).code(), absl::StatusCode::kInvalidArgument);
+}
+
 TEST(MeshCodec, VerticesAreNumberedInFirstUseOrder) {
   OrderedMesh mesh;
   for (int v = 0; v < 10; ++v) {
