@@ -5,6 +5,7 @@
 //   bench_stream [SPEC] [TRIANGLES] [VIEWS]      default: cayley:257 1000000 7
 // VIEWS 0 prints the codec figures only.
 #include <grpcpp/grpcpp.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
@@ -32,6 +33,15 @@ double Ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
+// CPU time of this process (server and client threads), ms: steadier than wall time on a
+// shared machine.
+double CpuMs() {
+  rusage u;
+  getrusage(RUSAGE_SELF, &u);
+  return 1e3 * (u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
+         1e-3 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.empty() ? 0 : v[v.size() / 2];
@@ -52,13 +62,13 @@ struct CodecRun {
 };
 
 template <typename EncodeFn>
-CodecRun RunCodec(const OrderedMesh& mesh, EncodeFn encode) {
+CodecRun RunCodec(const OrderedMesh& mesh, EncodeFn encode, size_t chunk = 65536) {
   CodecRun run;
   size_t bytes = 0;
   std::string out;
   OrderedMesh decoded;
-  for (size_t first = 0; first < mesh.triangle_count(); first += 65536) {
-    const size_t n = std::min<size_t>(65536, mesh.triangle_count() - first);
+  for (size_t first = 0; first < mesh.triangle_count(); first += chunk) {
+    const size_t n = std::min<size_t>(chunk, mesh.triangle_count() - first);
     const auto t0 = Clock::now();
     const absl::Status s = encode(first, n, &out);
     const auto t1 = Clock::now();
@@ -168,6 +178,17 @@ void CodecFigures(const OrderedMesh& mesh, const Volume& volume) {
   o.position_bits = bits;
   o.position_box = box;
   CodecBreakdown(mesh, o);
+  std::printf("  default codec by chunk size (B/tri):");
+  for (size_t chunk : {4096, 8192, 16384, 32768, 65536}) {
+    const CodecRun run = RunCodec(
+        mesh,
+        [&](size_t first, size_t n, std::string* out) {
+          return EncodeChunk(mesh, first, n, o, out);
+        },
+        chunk);
+    std::printf(" %zuk %.2f", chunk / 1024, run.bytes_per_triangle);
+  }
+  std::printf("\n");
 }
 
 struct ViewTiming {
@@ -252,14 +273,15 @@ int main(int argc, char** argv) {
       "\nview change -> frame at the client over loopback gRPC (eps %.4g, %d views, "
       "median [min]; extract ms: the server's extraction alone)\n",
       eps, views);
-  std::printf("  %-7s %-8s %10s %16s %16s %12s %10s\n", "codec", "decoded", "triangles",
-              "first chunk ms", "complete ms", "extract ms", "bytes/tri");
+  std::printf("  %-7s %-8s %10s %16s %16s %12s %10s %8s\n", "codec", "decoded", "triangles",
+              "first chunk ms", "complete ms", "extract ms", "bytes/tri", "cpu ms");
   for (pb::Codec codec : {pb::DRACO, pb::RAW}) {
     for (bool decode : {false, true}) {
       auto session = (*client)->OpenSession();
       if (!session.ok()) return 1;
       std::vector<double> first, complete, extract;
       ViewTiming t{};
+      double cpu_start = 0;
       for (int i = -1; i < views; ++i) {  // view -1 warms the volume and the connection
         pb::ViewRequest v;
         v.set_volume(spec);
@@ -275,16 +297,20 @@ int main(int argc, char** argv) {
           std::fprintf(stderr, "bench_stream: view failed\n");
           return 1;
         }
-        if (i < 0) continue;
+        if (i < 0) {
+          cpu_start = CpuMs();
+          continue;
+        }
         first.push_back(t.first_chunk_ms);
         complete.push_back(t.complete_ms);
         extract.push_back(t.server_extract_ms);
       }
-      std::printf("  %-7s %-8s %10lld %8.1f [%5.1f] %8.1f [%5.1f] %12.1f %10.2f\n",
+      const double cpu_per_view = (CpuMs() - cpu_start) / views;
+      std::printf("  %-7s %-8s %10lld %8.1f [%5.1f] %8.1f [%5.1f] %12.1f %10.2f %8.0f\n",
                   codec == pb::RAW ? "raw" : "draco", decode ? "yes" : "no", (long long)t.triangles,
                   Median(first), *std::min_element(first.begin(), first.end()), Median(complete),
                   *std::min_element(complete.begin(), complete.end()), Median(extract),
-                  double(t.bytes) / double(std::max<int64_t>(1, t.triangles)));
+                  double(t.bytes) / double(std::max<int64_t>(1, t.triangles)), cpu_per_view);
       (*session)->CloseSend().IgnoreError();
       (*session)->Finish().IgnoreError();
     }
