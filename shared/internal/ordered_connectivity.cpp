@@ -22,6 +22,9 @@ uint64_t EdgeKey(uint32_t from, uint32_t to) { return (uint64_t{from} << 32) | t
 // The coder state both sides keep in step.
 class CoderState {
  public:
+  // Vertices are numbered 0..vertex_count-1.
+  explicit CoderState(size_t vertex_count) : in_cache_(vertex_count, 0) {}
+
   // Most recent first: k = 0 is the last edge pushed. Requires k < edge_count().
   uint64_t edge(uint32_t k) const { return edges_[(pushes_ - 1 - k) & (kEdgeFifoSize - 1)]; }
   uint32_t edge_count() const { return std::min(pushes_, kEdgeFifoSize); }
@@ -35,6 +38,7 @@ class CoderState {
   // Position of `vertex` in the cache, or cache_size() if absent. Most lookups are of recently
   // used vertices, near the front.
   uint32_t FindCached(uint32_t vertex) const {
+    if (!in_cache_[vertex]) return cache_size_;
     uint32_t i = 0;
     while (i < cache_size_ && cache_[Slot(i)] != vertex) ++i;
     return i;
@@ -81,7 +85,12 @@ class CoderState {
     if (from == cache_size_) {
       // New to the cache: it takes the slot before the front (the least recent one if full).
       front_ = (front_ - 1) & (kVertexCacheSize - 1);
-      cache_size_ = std::min(cache_size_ + 1, kVertexCacheSize);
+      if (cache_size_ == kVertexCacheSize) {
+        in_cache_[cache_[front_]] = 0;
+      } else {
+        ++cache_size_;
+      }
+      in_cache_[vertex] = 1;
     } else {
       for (uint32_t i = from; i > 0; --i) cache_[Slot(i)] = cache_[Slot(i - 1)];
     }
@@ -93,6 +102,7 @@ class CoderState {
   uint32_t cache_[kVertexCacheSize] = {};
   uint32_t front_ = 0;
   uint32_t cache_size_ = 0;
+  std::vector<uint8_t> in_cache_;  // per vertex: 1 while it is in cache_
 };
 
 // Encoder side: finds the newest FIFO entry holding an edge without scanning the FIFO. A
@@ -158,7 +168,7 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
   std::vector<uint32_t> corner_symbols;
   std::vector<uint32_t> explicit_values;
   corner_symbols.reserve(triangle_count + vertex_count);
-  CoderState state;
+  CoderState state(vertex_count);
   auto index = std::make_unique<EdgeIndex>();
   auto record = [&index](uint64_t key, uint32_t push) { index->Record(key, push); };
   uint32_t next = 0;  // the number a new vertex gets
@@ -255,7 +265,7 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
   }
 
   triangles->resize(3 * triangle_count);
-  CoderState state;
+  CoderState state(vertex_count);
   uint32_t next = 0;
   size_t corner = 0, explicit_index = 0;
   auto decode_corner = [&](uint32_t* vertex, uint32_t* at) -> bool {
@@ -268,8 +278,8 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
       const uint32_t back = explicit_values[explicit_index++];
       if (back >= next) return false;
       *vertex = next - 1 - back;
-      // Not in the cache, or the encoder would have used its position; a stream that codes a
-      // cached vertex explicitly still decodes to the same state, as the lookup below finds it.
+      // Normally not in the cache (the encoder would have used its position), but a stream
+      // may code a cached vertex explicitly: the lookup in Add decides.
       *at = CoderState::kUnknown;
     } else {
       if (s - 1 >= state.cache_size()) return false;
