@@ -1,4 +1,4 @@
-// Frame codec: both codecs keep triangle order and surfaces, Draco stays within its documented
+// Frame codec: all codecs keep triangle order and surfaces, Draco stays within its documented
 // error bounds, chunks append, and malformed or hostile input returns errors without crashing.
 #include <gtest/gtest.h>
 
