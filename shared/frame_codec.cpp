@@ -13,6 +13,7 @@
 
 #include "shared/internal/chunk_gather.h"
 #include "shared/internal/draco_mesh.h"
+#include "shared/internal/ordered_connectivity.h"
 #include "shared/mesh_validate.h"
 
 // Header fields and raw payloads are copied with memcpy of host values.
@@ -69,12 +70,10 @@ absl::Status SealChunk(ChunkCodec codec, bool has_normals, size_t triangle_count
   return absl::OkStatus();
 }
 
-absl::Status EncodeDracoChunk(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
-                              const CodecOptions& options, std::string* out) {
+absl::Status EncodeDracoChunk(const internal::GatheredChunk& chunk, const CodecOptions& options,
+                              std::string* out) {
   ISOSTREAM_RETURN_IF_ERROR(internal::CheckCodecOptions(options));
-  internal::GatheredChunk chunk;
-  ISOSTREAM_RETURN_IF_ERROR(
-      internal::GatherTriangleRange(mesh, first_triangle, triangle_count, &chunk));
+  const size_t triangle_count = chunk.triangle_count();
   const bool has_normals = !chunk.normals.empty() && triangle_count > 0;
   out->assign(kChunkHeaderSize, '\0');
   if (triangle_count == 0) {
@@ -89,22 +88,30 @@ absl::Status EncodeDracoChunk(const OrderedMesh& mesh, size_t first_triangle, si
   settings.normal_bits = options.normal_bits;
   settings.compress_connectivity = options.compress_connectivity;
   settings.position_box = options.position_box ? &*options.position_box : nullptr;
+  ChunkCodec codec = ChunkCodec::kDraco;
   std::string payload;
-  ISOSTREAM_RETURN_IF_ERROR(internal::EncodeDracoMesh(chunk, settings, &payload, nullptr));
+  if (options.connectivity == CodecOptions::Connectivity::kEdgeCache) {
+    codec = ChunkCodec::kDracoEdgeCache;
+    payload.assign(4, '\0');
+    ISOSTREAM_RETURN_IF_ERROR(internal::EncodeDracoPoints(chunk, settings, &payload));
+    Store<uint32_t>(payload.data(), static_cast<uint32_t>(payload.size() - 4));
+    ISOSTREAM_RETURN_IF_ERROR(internal::EncodeOrderedConnectivity(
+        chunk.triangles.data(), triangle_count, chunk.vertex_count(), &payload));
+  } else {
+    ISOSTREAM_RETURN_IF_ERROR(internal::EncodeDracoMesh(chunk, settings, &payload, nullptr));
+  }
   // Plain indices take at least a byte each, which restores the floor decoders rely on.
   if (triangle_count > kMaxTrianglesPerDracoByte * payload.size()) {
+    codec = ChunkCodec::kDraco;
     settings.compress_connectivity = false;
     ISOSTREAM_RETURN_IF_ERROR(internal::EncodeDracoMesh(chunk, settings, &payload, nullptr));
   }
   out->append(payload);
-  return SealChunk(ChunkCodec::kDraco, has_normals, triangle_count, chunk.vertex_count(), out);
+  return SealChunk(codec, has_normals, triangle_count, chunk.vertex_count(), out);
 }
 
-absl::Status EncodeRawChunk(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
-                            std::string* out) {
-  internal::GatheredChunk chunk;
-  ISOSTREAM_RETURN_IF_ERROR(
-      internal::GatherTriangleRange(mesh, first_triangle, triangle_count, &chunk));
+absl::Status EncodeRawChunk(const internal::GatheredChunk& chunk, std::string* out) {
+  const size_t triangle_count = chunk.triangle_count();
   const bool has_normals = !chunk.normals.empty() && triangle_count > 0;
   const size_t vertex_count = chunk.vertex_count();
   out->assign(kChunkHeaderSize + RawPayloadSize(vertex_count, triangle_count, has_normals), '\0');
@@ -176,11 +183,40 @@ absl::StatusOr<ChunkHeader> CheckChunk(const char* data, size_t size) {
   return header;
 }
 
+// Codec 3: the point cloud's size, the point cloud, the connectivity.
+absl::Status DecodeEdgeCachePayload(const ChunkHeader& header, const char* payload,
+                                    OrderedMesh* append_to) {
+  const size_t size = header.payload_size;
+  if (size < 4) return absl::DataLossError("edge-cache payload is shorter than its size field");
+  const size_t points_size = Load<uint32_t>(payload);
+  if (points_size > size - 4) {
+    return absl::DataLossError(absl::StrCat("edge-cache payload declares a ", points_size,
+                                            "-byte point cloud in ", size - 4, " bytes"));
+  }
+  const char* points = payload + 4;
+  // Cheap checks first: the point count in Draco's header, then the connectivity.
+  uint32_t draco_points = 0;
+  ISOSTREAM_RETURN_IF_ERROR(internal::ReadDracoPointCloudCount(points, points_size, &draco_points));
+  if (draco_points != header.vertex_count) {
+    return absl::DataLossError(absl::StrCat("Draco payload holds ", draco_points,
+                                            " points; expected ", header.vertex_count));
+  }
+  std::vector<uint32_t> triangles;
+  ISOSTREAM_RETURN_IF_ERROR(
+      internal::DecodeOrderedConnectivity(points + points_size, size - 4 - points_size,
+                                          header.triangle_count, header.vertex_count, &triangles));
+  return internal::DecodeDracoPoints(points, points_size, std::move(triangles), header.vertex_count,
+                                     header.has_normals, append_to);
+}
+
 absl::Status DecodeChecked(const ChunkHeader& header, const char* data, OrderedMesh* append_to) {
   ISOSTREAM_RETURN_IF_ERROR(ValidateMeshSizes(*append_to));
   const char* payload = data + kChunkHeaderSize;
   if (header.codec == ChunkCodec::kRaw) return DecodeRawPayload(header, payload, append_to);
   if (header.triangle_count == 0) return absl::OkStatus();
+  if (header.codec == ChunkCodec::kDracoEdgeCache) {
+    return DecodeEdgeCachePayload(header, payload, append_to);
+  }
   return internal::DecodeDracoMesh(payload, header.payload_size, header.triangle_count,
                                    header.vertex_count, header.has_normals, append_to);
 }
@@ -274,7 +310,8 @@ absl::StatusOr<ChunkHeader> ReadChunkHeader(const char* data, size_t size) {
   }
   const uint8_t codec = Load<uint8_t>(data + 5);
   if (codec != static_cast<uint8_t>(ChunkCodec::kRaw) &&
-      codec != static_cast<uint8_t>(ChunkCodec::kDraco)) {
+      codec != static_cast<uint8_t>(ChunkCodec::kDraco) &&
+      codec != static_cast<uint8_t>(ChunkCodec::kDracoEdgeCache)) {
     return absl::InvalidArgumentError(absl::StrCat("unknown chunk codec id ", int{codec}));
   }
   const uint16_t flags = Load<uint16_t>(data + 6);
@@ -319,20 +356,62 @@ absl::StatusOr<ChunkHeader> ReadChunkHeader(const char* data, size_t size) {
 
 absl::Status EncodeChunk(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
                          const CodecOptions& options, std::string* out) {
-  return GuardEncode(
-      out, [&] { return EncodeDracoChunk(mesh, first_triangle, triangle_count, options, out); });
+  return GuardEncode(out, [&]() -> absl::Status {
+    internal::GatheredChunk chunk;
+    ISOSTREAM_RETURN_IF_ERROR(
+        internal::GatherTriangleRange(mesh, first_triangle, triangle_count, &chunk));
+    return EncodeDracoChunk(chunk, options, out);
+  });
 }
 
 absl::Status EncodeChunkRaw(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
                             std::string* out) {
-  return GuardEncode(out,
-                     [&] { return EncodeRawChunk(mesh, first_triangle, triangle_count, out); });
+  return GuardEncode(out, [&]() -> absl::Status {
+    internal::GatheredChunk chunk;
+    ISOSTREAM_RETURN_IF_ERROR(
+        internal::GatherTriangleRange(mesh, first_triangle, triangle_count, &chunk));
+    return EncodeRawChunk(chunk, out);
+  });
+}
+
+ChunkCopy::ChunkCopy() = default;
+ChunkCopy::~ChunkCopy() = default;
+ChunkCopy::ChunkCopy(ChunkCopy&&) noexcept = default;
+ChunkCopy& ChunkCopy::operator=(ChunkCopy&&) noexcept = default;
+
+size_t ChunkCopy::triangle_count() const { return chunk_ ? chunk_->triangle_count() : 0; }
+
+ChunkCopier::ChunkCopier() : scratch_(std::make_unique<internal::GatherScratch>()) {}
+ChunkCopier::~ChunkCopier() = default;
+
+absl::Status ChunkCopier::Copy(const OrderedMesh& mesh, size_t first_triangle,
+                               size_t triangle_count, ChunkCopy* out) {
+  if (out == nullptr) return absl::InvalidArgumentError("out is null");
+  try {
+    auto chunk = std::make_unique<internal::GatheredChunk>();
+    ISOSTREAM_RETURN_IF_ERROR(internal::GatherTriangleRange(mesh, first_triangle, triangle_count,
+                                                            chunk.get(), scratch_.get()));
+    out->chunk_ = std::move(chunk);
+    return absl::OkStatus();
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError("out of memory while copying a chunk");
+  }
+}
+
+absl::Status EncodeChunk(const ChunkCopy& copy, const CodecOptions& options, std::string* out) {
+  if (!copy.chunk_) return absl::InvalidArgumentError("empty ChunkCopy (nothing was copied)");
+  return GuardEncode(out, [&] { return EncodeDracoChunk(*copy.chunk_, options, out); });
+}
+
+absl::Status EncodeChunkRaw(const ChunkCopy& copy, std::string* out) {
+  if (!copy.chunk_) return absl::InvalidArgumentError("empty ChunkCopy (nothing was copied)");
+  return GuardEncode(out, [&] { return EncodeRawChunk(*copy.chunk_, out); });
 }
 
 absl::Status DecodeChunk(const char* data, size_t size, OrderedMesh* append_to) {
   return GuardDecode(append_to, [&]() -> absl::Status {
     ISOSTREAM_ASSIGN_OR_RETURN(const ChunkHeader header, CheckChunk(data, size));
-    if (header.codec != ChunkCodec::kDraco) {
+    if (header.codec == ChunkCodec::kRaw) {
       return absl::InvalidArgumentError("DecodeChunk given a raw chunk; use DecodeAnyChunk");
     }
     return DecodeChecked(header, data, append_to);

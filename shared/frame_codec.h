@@ -2,10 +2,10 @@
 // back, keeping triangle order, because the order is the product (drawing first to last is the
 // back-to-front order the server computed).
 //
-// Two codecs share one 24-byte little-endian chunk header:
+// Three codecs share one 24-byte little-endian chunk header:
 //   0  'I' 'S' 'C' '1'   magic
 //   4  uint8   format version (1)
-//   5  uint8   codec: 1 raw, 2 Draco
+//   5  uint8   codec: 1 raw, 2 Draco mesh, 3 Draco edge cache
 //   6  uint16  flags: bit 0 = the chunk carries normals; other bits must be 0
 //   8  uint32  triangle count
 //   12 uint32  vertex count
@@ -15,15 +15,26 @@
 // Raw payload: float32 positions[3V], float32 normals[3V] (if flagged), uint32 triangles[3T],
 // uint8 surface[T].
 //
-// Draco payload: one Draco mesh written with MESH_SEQUENTIAL_ENCODING, the only Draco method
-// that keeps face order (edgebreaker reorders faces, drops degenerate ones and splits
-// non-manifold vertices). Attributes: POSITION (float32 x3, quantized unless position_bits is
-// 0), NORMAL (float32 x3, octahedral-quantized unless normal_bits is 0; absent when the mesh has
-// no normals) and one GENERIC uint8 per vertex holding the vertex's surface index in bits 0-6
-// and, in bit 7, "normal undefined": Draco's octahedral coding cannot represent the zero normal
-// OrderedMesh uses for "undefined" and would turn it into (1, 0, 0).
+// Draco vertex attributes (codecs 2 and 3): POSITION (float32 x3, quantized unless
+// position_bits is 0), NORMAL (float32 x3, octahedral-quantized unless normal_bits is 0; absent
+// when the mesh has no normals) and one GENERIC uint8 per vertex holding the vertex's surface
+// index in bits 0-6 and, in bit 7, "normal undefined": Draco's octahedral coding cannot
+// represent the zero normal OrderedMesh uses for "undefined" and would turn it into (1, 0, 0).
+// Draco codes them in vertex order, each value as a delta from the previous vertex's.
 //
-// In both codecs the chunk's vertices are the ones its triangles use, numbered in order of first
+// Draco mesh payload (codec 2): one Draco mesh written with MESH_SEQUENTIAL_ENCODING, the only
+// Draco mesh method that keeps face order (edgebreaker reorders faces, drops degenerate ones and
+// splits non-manifold vertices), with the attributes above.
+//
+// Draco edge-cache payload (codec 3, EncodeChunk's default): uint32 byte size of a Draco point
+// cloud, that point cloud (POINT_CLOUD_SEQUENTIAL_ENCODING, which keeps point order, with the
+// attributes above), then the triangles coded by isostream's order-keeping connectivity coder
+// (shared/internal/ordered_connectivity.h: an edge FIFO and a vertex cache, entropy-coded with
+// Draco's own symbol coder). Same vertices, triangles and corner order as codec 2; on a
+// view-ordered 1 M-triangle isosurface frame the connectivity costs ~1.45 bytes per triangle
+// instead of Draco's ~2.6.
+//
+// In every codec the chunk's vertices are the ones its triangles use, numbered in order of first
 // use, with a mesh vertex used by triangles of two surfaces duplicated so that every vertex has
 // one surface. A chunk therefore decodes to the same topology whichever codec carried it.
 //
@@ -34,6 +45,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -41,6 +53,11 @@
 #include "shared/status.h"
 
 namespace isostream {
+
+namespace internal {
+struct GatheredChunk;
+struct GatherScratch;
+}  // namespace internal
 
 // The cube [origin, origin + range] on each axis over which positions are quantized.
 struct QuantizationBox {
@@ -81,11 +98,17 @@ float PositionErrorBound(const QuantizationBox& box, int position_bits);
 float NormalErrorBound(int normal_bits);
 
 struct CodecOptions {
+  // How EncodeChunk codes the triangles.
+  enum class Connectivity : uint8_t {
+    kEdgeCache,        // codec 3: vertices in a Draco point cloud, isostream's connectivity coder
+    kDracoSequential,  // codec 2: one Draco sequential mesh (see compress_connectivity)
+  };
+  Connectivity connectivity = Connectivity::kEdgeCache;
   // Position quantization bits, 1..30; 0 stores float32 positions losslessly.
   int position_bits = 14;
   // Octahedral normal quantization bits, 2..30; 0 stores float32 normals losslessly.
   int normal_bits = 10;
-  // Entropy-code the index deltas (Draco's "compress_connectivity" for sequential encoding).
+  // With kDracoSequential: entropy-code the index deltas (Draco's "compress_connectivity").
   // Measured on a 1M-triangle sphere (MeshCodecReport in tests/unit/mesh_codec_test.cpp):
   // 2.2 instead of 10.3 bytes/triangle in generation order, 7.7 instead of 12.2 when sorted
   // back to front across its bands; encode and decode times are about the same either way.
@@ -97,15 +120,15 @@ struct CodecOptions {
   std::optional<QuantizationBox> position_box;
 };
 
-enum class ChunkCodec : uint8_t { kRaw = 1, kDraco = 2 };
+enum class ChunkCodec : uint8_t { kRaw = 1, kDraco = 2, kDracoEdgeCache = 3 };
 
 inline constexpr size_t kChunkHeaderSize = 24;
 inline constexpr uint32_t kChunkFormatVersion = 1;
 // Upper limit on triangles in one chunk; chunks meant for transport are far smaller.
 inline constexpr uint32_t kMaxChunkTriangles = 1u << 26;
 // A Draco chunk's payload has at least one byte per this many triangles: the encoder falls back
-// to uncompressed indices to guarantee it, and decoders use it to reject counts that could not
-// fit in the payload before allocating for them.
+// to a codec 2 chunk with uncompressed indices to guarantee it, and decoders use it to reject
+// counts that could not fit in the payload before allocating for them.
 inline constexpr uint32_t kMaxTrianglesPerDracoByte = 16;
 
 struct ChunkHeader {
@@ -125,11 +148,11 @@ struct ChunkHeader {
 absl::StatusOr<ChunkHeader> ReadChunkHeader(const char* data, size_t size);
 
 // Encodes triangles [first_triangle, first_triangle + triangle_count) of `mesh` as a Draco
-// chunk, replacing the contents of `out`. The mesh is checked as far as the range reads it
-// (sizes, indices, surface < kMaxSurfaces, finite positions and normals; positions inside
-// options.position_box when set) and options are range-checked; failures return
-// InvalidArgument/OutOfRange and leave `out` unspecified. An empty range gives a valid empty
-// chunk. Costs about 0.1-0.2 s per million triangles.
+// chunk (codec 3, or 2 with Connectivity::kDracoSequential), replacing the contents of `out`. The
+// mesh is checked as far as the range reads it (sizes, indices, surface < kMaxSurfaces, finite
+// positions and normals; positions inside options.position_box when set) and options are
+// range-checked; failures return InvalidArgument/OutOfRange and leave `out` unspecified. An empty
+// range gives a valid empty chunk. Costs about 0.1-0.2 s per million triangles.
 absl::Status EncodeChunk(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
                          const CodecOptions& options, std::string* out);
 
@@ -138,14 +161,54 @@ absl::Status EncodeChunk(const OrderedMesh& mesh, size_t first_triangle, size_t 
 absl::Status EncodeChunkRaw(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
                             std::string* out);
 
+// Two-step encoding, for a producer that must copy a range out of a mesh that keeps changing
+// (the extractor appends to its mesh while a frame streams) and encode it later on another
+// thread. ChunkCopier::Copy does the first half of EncodeChunk: it checks the range as
+// EncodeChunk does and copies its triangles with their own vertices (first-use order, split
+// per surface); EncodeChunk(copy, ...) does the rest. The result is byte-identical to the
+// one-step call. A ChunkCopier keeps a lookup table indexed by mesh vertex across calls, so
+// copying consecutive ranges of a large mesh costs O(range) each, with no per-call table.
+class ChunkCopy {
+ public:
+  ChunkCopy();
+  ~ChunkCopy();
+  ChunkCopy(ChunkCopy&&) noexcept;
+  ChunkCopy& operator=(ChunkCopy&&) noexcept;
+  size_t triangle_count() const;
+
+ private:
+  friend class ChunkCopier;
+  friend absl::Status EncodeChunk(const ChunkCopy&, const CodecOptions&, std::string*);
+  friend absl::Status EncodeChunkRaw(const ChunkCopy&, std::string*);
+  std::unique_ptr<internal::GatheredChunk> chunk_;
+};
+
+class ChunkCopier {
+ public:
+  ChunkCopier();
+  ~ChunkCopier();
+  // Replaces `out` with triangles [first_triangle, first_triangle + triangle_count) of `mesh`.
+  // Errors as EncodeChunk's for the same range; `out` is then unchanged.
+  absl::Status Copy(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
+                    ChunkCopy* out);
+
+ private:
+  std::unique_ptr<internal::GatherScratch> scratch_;
+};
+
+// EncodeChunk and EncodeChunkRaw of a copied range. InvalidArgument for a ChunkCopy that holds
+// no copy.
+absl::Status EncodeChunk(const ChunkCopy& copy, const CodecOptions& options, std::string* out);
+absl::Status EncodeChunkRaw(const ChunkCopy& copy, std::string* out);
+
 // Decodes the chunk in data[0, size) (size must be exactly header + payload) and appends its
 // vertices and triangles to `append_to`, offsetting the indices by the vertex count it had.
 // Normals are appended too (zero when the chunk has none), back-filling zeros first if
 // `append_to` had vertices but no normals. On any error `append_to` is left as it was.
-// DecodeChunk accepts only Draco chunks and DecodeChunkRaw only raw ones; DecodeAnyChunk
-// dispatches on the header's codec. Returns InvalidArgument for malformed headers, DataLoss for
-// truncated or corrupt payloads, OutOfRange if the result would need more than 2^32 - 1
-// vertices.
+// DecodeChunk accepts only Draco chunks (codecs 2 and 3) and DecodeChunkRaw only raw ones;
+// DecodeAnyChunk dispatches on the header's codec. Returns InvalidArgument for malformed headers,
+// DataLoss for truncated or corrupt payloads, OutOfRange if the result would need more than 2^32 -
+// 1 vertices.
 absl::Status DecodeChunk(const char* data, size_t size, OrderedMesh* append_to);
 absl::Status DecodeChunkRaw(const char* data, size_t size, OrderedMesh* append_to);
 absl::Status DecodeAnyChunk(const char* data, size_t size, OrderedMesh* append_to);

@@ -119,7 +119,7 @@ int main(int argc, char** argv) {
   std::string config_file, listen, cache_dir, tls_cert, tls_key, token, log_level;
   std::vector<std::string> volumes;
   int threads = 0, max_sessions = 0, max_isovalues = 0, max_dim = 0, chunk_triangles = 0;
-  int64_t max_triangles = 0, deadline_ms = 0;
+  int64_t max_triangles = 0, deadline_ms = 0, idle_timeout_s = 0;
   bool no_cache = false;
   app.add_option("--config", config_file, "JSON config file (flags override it)");
   auto* o_listen = app.add_option("--listen", listen,
@@ -137,6 +137,9 @@ int main(int argc, char** argv) {
       app.add_option("--max-isovalues", max_isovalues, "isovalues per request (default 16)");
   auto* o_deadline =
       app.add_option("--deadline-ms", deadline_ms, "time limit per frame (default 30000)");
+  auto* o_idle = app.add_option("--idle-timeout-s", idle_timeout_s,
+                                "end a Session with no request and no frame in flight for this "
+                                "many seconds (default 300; 0: never)");
   auto* o_cache = app.add_option("--cache-dir", cache_dir, "hierarchy cache directory");
   auto* o_nocache = app.add_flag("--no-cache", no_cache, "never read or write the cache");
   auto* o_cert = app.add_option("--tls-cert", tls_cert, "PEM certificate chain (enables TLS)");
@@ -179,6 +182,7 @@ int main(int argc, char** argv) {
   if (*o_tris) config.limits.max_triangles = max_triangles;
   if (*o_iso) config.limits.max_isovalues = max_isovalues;
   if (*o_deadline) config.limits.deadline_ms = deadline_ms;
+  if (*o_idle) config.limits.idle_timeout_s = idle_timeout_s;
   if (*o_cache) config.cache_dir = cache_dir;
   if (*o_nocache) config.no_cache = no_cache;
   if (*o_cert) config.tls_cert = tls_cert;

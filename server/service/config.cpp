@@ -54,14 +54,16 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
   }
   if (j.contains("limits")) {
     const json& l = j["limits"];
-    ISOSTREAM_RETURN_IF_ERROR(
-        CheckKeys(l, {"max_sessions", "max_triangles", "max_isovalues", "deadline_ms", "max_dim"},
-                  "limits."));
+    ISOSTREAM_RETURN_IF_ERROR(CheckKeys(l,
+                                        {"max_sessions", "max_triangles", "max_isovalues",
+                                         "deadline_ms", "max_dim", "idle_timeout_s"},
+                                        "limits."));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_sessions", "limits.", &c->limits.max_sessions));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_triangles", "limits.", &c->limits.max_triangles));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_isovalues", "limits.", &c->limits.max_isovalues));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "deadline_ms", "limits.", &c->limits.deadline_ms));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_dim", "limits.", &c->limits.max_dim));
+    ISOSTREAM_RETURN_IF_ERROR(Get(l, "idle_timeout_s", "limits.", &c->limits.idle_timeout_s));
   }
   if (j.contains("frames")) {
     const json& f = j["frames"];
@@ -100,6 +102,8 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
     return bad("max_isovalues must be in 1..16");
   if (c.limits.deadline_ms < 1) return bad("deadline_ms must be at least 1");
   if (c.limits.max_dim < 2 || c.limits.max_dim > 4097) return bad("max_dim must be in 2..4097");
+  if (c.limits.idle_timeout_s < 0 || c.limits.idle_timeout_s > 7 * 86400)
+    return bad("idle_timeout_s must be in 0 (off)..604800");
   if (c.tls_cert.empty() != c.tls_key.empty()) return bad("TLS needs both a certificate and a key");
   // Chunks must stay under gRPC's 4 MiB message limit: a Draco chunk needs at most about 40
   // bytes per triangle (no shared vertices, indices stored plainly); raw chunks are cut at

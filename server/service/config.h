@@ -15,6 +15,9 @@ struct Limits {
   int max_isovalues = 16;
   int64_t deadline_ms = 30'000;  // per frame, extraction and encoding
   int max_dim = 257;             // samples per axis of a generator served without a catalogue
+  // A Session with no view request and nothing in flight for this long is ended by the server
+  // with DEADLINE_EXCEEDED, freeing its slot and memory; 0 = never.
+  int64_t idle_timeout_s = 300;
 };
 
 struct DaemonConfig {
@@ -42,7 +45,7 @@ struct DaemonConfig {
 //    "volumes": {"head": "/data/head.nii.gz"}, "token": "...",
 //    "tls": {"cert": "server.pem", "key": "server.key"},
 //    "limits": {"max_sessions": 16, "max_triangles": 4000000, "max_isovalues": 16,
-//               "deadline_ms": 30000, "max_dim": 257},
+//               "deadline_ms": 30000, "max_dim": 257, "idle_timeout_s": 300},
 //    "frames": {"chunk_triangles": 65536, "first_chunk_triangles": 8192,
 //               "coarse_triangles": 20000, "max_queued_chunks": 8},
 //    "log_level": "info"}

@@ -16,37 +16,6 @@ double MsSince(Clock::time_point t) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-// Copies triangles [first, first + count) of `mesh` and the vertices they use into `out`.
-// The copy is what lets encoding run after the extractor's callback returns: the extractor
-// keeps appending to (and reallocating) its mesh. `stamp`/`slot` persist across chunks so the
-// remap table is never cleared, only grown.
-void Gather(const OrderedMesh& mesh, size_t first, size_t count, uint32_t chunk_stamp,
-            std::vector<uint32_t>* stamp, std::vector<uint32_t>* slot, OrderedMesh* out) {
-  const bool normals = mesh.normals.size() == mesh.positions.size();
-  if (stamp->size() < mesh.vertex_count()) {
-    stamp->resize(mesh.vertex_count(), 0);
-    slot->resize(mesh.vertex_count(), 0);
-  }
-  out->clear();
-  out->triangles.resize(3 * count);
-  out->surface.assign(mesh.surface.begin() + first, mesh.surface.begin() + first + count);
-  out->positions.reserve(3 * count);
-  if (normals) out->normals.reserve(3 * count);
-  const uint32_t* tri = mesh.triangles.data() + 3 * first;
-  for (size_t i = 0; i < 3 * count; ++i) {
-    const uint32_t v = tri[i];
-    if ((*stamp)[v] != chunk_stamp) {
-      (*stamp)[v] = chunk_stamp;
-      (*slot)[v] = uint32_t(out->vertex_count());
-      out->positions.insert(out->positions.end(), &mesh.positions[3 * v],
-                            &mesh.positions[3 * v] + 3);
-      if (normals)
-        out->normals.insert(out->normals.end(), &mesh.normals[3 * v], &mesh.normals[3 * v] + 3);
-    }
-    out->triangles[i] = (*slot)[v];
-  }
-}
-
 // The state one frame shares between the extractor's callback, the encoder jobs and the
 // producer's thread. Lives on the producer's stack: the producer waits for every encoder job
 // before returning.
@@ -169,7 +138,10 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   codec.position_box = volume.box;
 
   FrameState state;
-  std::vector<uint32_t> stamp, slot;
+  // Chunks are copied out of the extractor's mesh when cut: the extractor keeps appending to
+  // (and reallocating) it while the copies are encoded. The copier's lookup table lives for
+  // the frame, so each copy costs O(chunk).
+  ChunkCopier copier;
   size_t cut_end = 0;  // triangles [0, cut_end) are cut into chunks
 
   // Stops the frame for an internal reason; the first reason wins.
@@ -206,7 +178,13 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
 
   // Cuts triangles [cut_end, cut_end + count) into the next chunk and queues its encoding.
   auto cut = [&](const OrderedMesh& mesh, size_t count, bool last, const ExtractStats* stats) {
-    auto piece = std::make_shared<OrderedMesh>();
+    auto piece = std::make_shared<ChunkCopy>();
+    const absl::Status copied = copier.Copy(mesh, cut_end, count, piece.get());
+    if (!copied.ok()) {
+      std::lock_guard<std::mutex> lock(state.mu);
+      stop(absl::InternalError("copying a chunk failed: " + std::string(copied.message())));
+      return;
+    }
     size_t index;
     {
       std::lock_guard<std::mutex> lock(state.mu);
@@ -214,7 +192,6 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
       state.chunks.emplace_back();
       ++state.encoding;
     }
-    Gather(mesh, cut_end, count, uint32_t(index + 1), &stamp, &slot, piece.get());
     auto header = std::make_shared<pb::FrameChunk>();
     header->set_frame_id(view.request_id());
     header->set_coarse(coarse);
@@ -235,8 +212,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
     encoders_->Submit([&state, &release_locked, &stop, piece, header, index, raw, codec] {
       const Clock::time_point t = Clock::now();
       std::string bytes;
-      absl::Status s = raw ? EncodeChunkRaw(*piece, 0, piece->triangle_count(), &bytes)
-                           : EncodeChunk(*piece, 0, piece->triangle_count(), codec, &bytes);
+      absl::Status s = raw ? EncodeChunkRaw(*piece, &bytes) : EncodeChunk(*piece, codec, &bytes);
       if (s.ok() && bytes.size() > kMaxChunkBytes)
         s = absl::InternalError("encoded chunk of " + std::to_string(bytes.size()) +
                                 " bytes is over the message limit");

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <condition_variable>
 #include <deque>
 #include <map>
@@ -99,6 +100,12 @@ struct ServiceCore {
     streams_cv.notify_all();
   }
 
+  // Ends Session streams that have been idle for config.limits.idle_timeout_s: a thread that
+  // checks every open stream each tenth of the timeout (between 0.05 and 1 s). Not started
+  // when the timeout is 0.
+  void StartIdleReaper();
+  void StopIdleReaper();
+
   DaemonConfig config;
   ServerCounters counters;
   VolumeCatalogue catalogue;
@@ -106,6 +113,10 @@ struct ServiceCore {
   std::mutex streams_mu;
   std::condition_variable streams_cv;
   std::map<StreamBase*, std::weak_ptr<StreamBase>> streams;
+  std::thread idle_reaper;
+  std::mutex reaper_mu;
+  std::condition_variable reaper_cv;
+  bool reaper_stop = false;
   // Frame jobs wait for encoder jobs: the frame pool is declared last so it is destroyed
   // (drained and joined) first.
   std::unique_ptr<WorkerPool> encoders;
@@ -119,7 +130,41 @@ class StreamBase : public ChunkSink, public std::enable_shared_from_this<StreamB
   virtual ~StreamBase() = default;
   virtual void Drain() = 0;
   virtual void RunJobs() = 0;
+  // Ends the stream with DEADLINE_EXCEEDED if it is subject to the idle timeout and has had
+  // no request and nothing in flight since `now - timeout`.
+  virtual void CloseIfIdle(Clock::time_point now, std::chrono::seconds timeout) = 0;
 };
+
+void ServiceCore::StartIdleReaper() {
+  const auto timeout = std::chrono::seconds(config.limits.idle_timeout_s);
+  if (timeout.count() <= 0) return;
+  // A session ends at most a tenth of the timeout (or a second) after it became idle enough.
+  const auto period = std::clamp<std::chrono::milliseconds>(
+      std::chrono::duration_cast<std::chrono::milliseconds>(timeout) / 10,
+      std::chrono::milliseconds(50), std::chrono::milliseconds(1000));
+  idle_reaper = std::thread([this, timeout, period] {
+    std::unique_lock<std::mutex> lock(reaper_mu);
+    while (!reaper_cv.wait_for(lock, period, [&] { return reaper_stop; })) {
+      std::vector<std::shared_ptr<StreamBase>> open;
+      {
+        std::lock_guard<std::mutex> streams_lock(streams_mu);
+        for (auto& [ptr, weak] : streams)
+          if (auto s = weak.lock()) open.push_back(std::move(s));
+      }
+      const Clock::time_point now = Clock::now();
+      for (auto& s : open) s->CloseIfIdle(now, timeout);
+    }
+  });
+}
+
+void ServiceCore::StopIdleReaper() {
+  {
+    std::lock_guard<std::mutex> lock(reaper_mu);
+    reaper_stop = true;
+  }
+  reaper_cv.notify_all();
+  if (idle_reaper.joinable()) idle_reaper.join();
+}
 
 // A stream of frame chunks: the write queue (one write in flight), the latest-view-wins frame
 // job, and finishing exactly once after the last write. Reactor is ServerWriteReactor (Extract)
@@ -173,6 +218,7 @@ class ChunkStream : public Reactor, public StreamBase {
     {
       std::lock_guard<std::mutex> lock(mu_);
       write_in_flight_ = false;
+      last_activity_ = Clock::now();
       // A failed write means the stream is broken (the client went away).
       if (!ok) FailLocked(grpc::Status(grpc::StatusCode::CANCELLED, "write failed"));
       start = TakeNextWriteLocked();
@@ -197,6 +243,24 @@ class ChunkStream : public Reactor, public StreamBase {
     if (admitted_) spdlog::debug("{}: stream closed ({})", peer_, finish_status_.error_message());
     core_->Unregister(this, admitted_);
     std::shared_ptr<StreamBase> keep = std::move(self_);  // may destroy *this on return
+  }
+
+  void CloseIfIdle(Clock::time_point now, std::chrono::seconds timeout) override {
+    std::optional<grpc::Status> finish;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (!idle_timeout_applies_ || finishing_ || job_running_ || pending_ || !queue_.empty() ||
+          write_in_flight_ || now - last_activity_ < timeout) {
+        return;
+      }
+      spdlog::info("{}: session idle for {} s, closing it", peer_, timeout.count());
+      core_->counters.sessions_idle_closed.fetch_add(1);
+      FailLocked(grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                              "session idle for " + std::to_string(timeout.count()) +
+                                  " s (no view request); open a new session to continue"));
+      finish = TakeFinishLocked();
+    }
+    if (finish) this->Finish(*finish);
   }
 
   void Drain() override {
@@ -224,6 +288,7 @@ class ChunkStream : public Reactor, public StreamBase {
         if (!pending_ || finishing_) {
           pending_.reset();
           job_running_ = false;
+          last_activity_ = Clock::now();
           CompleteIfIdleLocked();
           break;
         }
@@ -344,8 +409,9 @@ class ChunkStream : public Reactor, public StreamBase {
   grpc::CallbackServerContext* context_;  // valid until OnDone; jobs may outlive it
   const std::string peer_;
   std::shared_ptr<StreamBase> self_;
-  bool admitted_ = false;   // holds a session slot (set before any other thread sees the stream)
-  CoarseHint coarse_hint_;  // used by the one running job only
+  bool admitted_ = false;  // holds a session slot (set before any other thread sees the stream)
+  bool idle_timeout_applies_ = false;  // Session streams, once admitted; under mu_
+  CoarseHint coarse_hint_;             // used by the one running job only
 
   mutable std::mutex mu_;
   std::deque<pb::FrameChunk> queue_;
@@ -360,6 +426,8 @@ class ChunkStream : public Reactor, public StreamBase {
   bool finishing_ = false;
   bool finish_called_ = false;
   grpc::Status finish_status_;
+  // Last request read, write completed or frame job ended; the idle clock runs from here.
+  Clock::time_point last_activity_ = Clock::now();
 };
 
 // Extract: one request, its frame(s), then OK.
@@ -403,6 +471,8 @@ class SessionStream final
     {
       std::lock_guard<std::mutex> lock(mu_);
       admitted_ = true;
+      idle_timeout_applies_ = true;
+      last_activity_ = Clock::now();
     }
     spdlog::debug("{}: session opened", peer_);
     StartRead(&incoming_);
@@ -426,6 +496,7 @@ class SessionStream final
       bool submit = false, read_more = false;
       {
         std::lock_guard<std::mutex> lock(mu_);
+        last_activity_ = received;
         if (!request.ok()) {
           FailLocked(ToGrpc(request.status()));
         } else if (!finishing_ && !draining_) {
@@ -445,9 +516,12 @@ class SessionStream final
 };
 
 IsostreamService::IsostreamService(const DaemonConfig& config)
-    : core_(std::make_shared<ServiceCore>(config)) {}
+    : core_(std::make_shared<ServiceCore>(config)) {
+  core_->StartIdleReaper();
+}
 
 IsostreamService::~IsostreamService() {
+  core_->StopIdleReaper();
   // Jobs first (they use the encoders), then the encoders.
   core_->frames.reset();
   core_->encoders.reset();
@@ -572,6 +646,7 @@ pb::ServerStats IsostreamService::Stats() const {
   s.set_sessions_total(c.sessions_total.load());
   s.set_sessions_closed(c.sessions_closed.load());
   s.set_sessions_rejected(c.sessions_rejected.load());
+  s.set_sessions_idle_closed(c.sessions_idle_closed.load());
   s.set_frames_started(c.frames_started.load());
   s.set_frames_sent(c.frames_sent.load());
   s.set_frames_cancelled(c.frames_cancelled.load());

@@ -1,7 +1,8 @@
 // The isostream.v1.Isostream gRPC service (callback API): catalogue calls, Extract and Session
 // streams, auth, limits and server counters. One reactor per stream with one write in flight
 // (OnWriteDone starts the next), so a slow client slows only its own stream; extraction and
-// encoding run on worker pools, never on gRPC's threads.
+// encoding run on worker pools, never on gRPC's threads. A Session with no request and nothing
+// in flight for limits.idle_timeout_s is ended with DEADLINE_EXCEEDED by a reaper thread.
 #pragma once
 
 #include <chrono>

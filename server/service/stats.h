@@ -11,6 +11,7 @@ struct ServerCounters {
   std::atomic<int64_t> sessions_total{0};
   std::atomic<int64_t> sessions_closed{0};
   std::atomic<int64_t> sessions_rejected{0};
+  std::atomic<int64_t> sessions_idle_closed{0};
   std::atomic<int64_t> frames_started{0};
   std::atomic<int64_t> frames_sent{0};
   std::atomic<int64_t> frames_cancelled{0};

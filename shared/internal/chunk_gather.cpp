@@ -52,12 +52,35 @@ class LocalIndexMap {
   absl::flat_hash_map<uint64_t, uint32_t> split_;
 };
 
-}  // namespace
+// The same mapping on a GatherScratch's table, for one call.
+class StampedIndexMap {
+ public:
+  StampedIndexMap(GatherScratch* scratch, size_t mesh_vertex_count) : s_(scratch) {
+    if (s_->entries.size() < mesh_vertex_count) s_->entries.resize(mesh_vertex_count);
+    if (++s_->call == 0) {  // wrapped: old entries could look current
+      std::fill(s_->entries.begin(), s_->entries.end(), GatherScratch::Entry{});
+      s_->call = 1;
+    }
+  }
 
-absl::Status GatherTriangleRange(const OrderedMesh& mesh, size_t first_triangle,
-                                 size_t triangle_count, GatheredChunk* out) {
-  ISOSTREAM_RETURN_IF_ERROR(ValidateMeshSizes(mesh));
-  ISOSTREAM_RETURN_IF_ERROR(ValidateTriangleRange(mesh, first_triangle, triangle_count));
+  uint32_t FindOrAdd(uint32_t vertex, uint8_t surface, uint32_t next) {
+    GatherScratch::Entry& e = s_->entries[vertex];
+    if (e.call != s_->call) {
+      e = {s_->call, next, surface};
+      return next;
+    }
+    if (e.surface == surface) return e.local;
+    return split_.try_emplace(SplitKey(vertex, surface), next).first->second;
+  }
+
+ private:
+  GatherScratch* s_;
+  absl::flat_hash_map<uint64_t, uint32_t> split_;
+};
+
+template <typename Map>
+absl::Status Gather(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count, Map* map,
+                    GatheredChunk* out) {
   const bool has_normals = !mesh.normals.empty();
   out->positions.clear();
   out->normals.clear();
@@ -73,13 +96,12 @@ absl::Status GatherTriangleRange(const OrderedMesh& mesh, size_t first_triangle,
   out->vertex_surface.reserve(vertex_bound);
 
   // Assign local indices in first-use order, copying each vertex when first seen.
-  LocalIndexMap map(mesh.vertex_count(), 3 * triangle_count);
   for (size_t t = 0; t < triangle_count; ++t) {
     const uint8_t surface = out->surface[t];
     for (int c = 0; c < 3; ++c) {
       const uint32_t vertex = mesh.triangles[3 * (first_triangle + t) + c];
       const uint32_t next = static_cast<uint32_t>(out->vertex_surface.size());
-      const uint32_t local = map.FindOrAdd(vertex, surface, next);
+      const uint32_t local = map->FindOrAdd(vertex, surface, next);
       out->triangles[3 * t + c] = local;
       if (local != next) continue;
       const float* position = &mesh.positions[3 * size_t{vertex}];
@@ -103,6 +125,21 @@ absl::Status GatherTriangleRange(const OrderedMesh& mesh, size_t first_triangle,
     }
   }
   return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status GatherTriangleRange(const OrderedMesh& mesh, size_t first_triangle,
+                                 size_t triangle_count, GatheredChunk* out,
+                                 GatherScratch* scratch) {
+  ISOSTREAM_RETURN_IF_ERROR(ValidateMeshSizes(mesh));
+  ISOSTREAM_RETURN_IF_ERROR(ValidateTriangleRange(mesh, first_triangle, triangle_count));
+  if (scratch) {
+    StampedIndexMap map(scratch, mesh.vertex_count());
+    return Gather(mesh, first_triangle, triangle_count, &map, out);
+  }
+  LocalIndexMap map(mesh.vertex_count(), 3 * triangle_count);
+  return Gather(mesh, first_triangle, triangle_count, &map, out);
 }
 
 }  // namespace isostream::internal

@@ -26,12 +26,27 @@ struct GatheredChunk {
   size_t triangle_count() const { return surface.size(); }
 };
 
+// Lookup state that GatherTriangleRange calls over one mesh can share: a table indexed by mesh
+// vertex that is sized once and never cleared (entries carry the number of the call that set
+// them). For a producer that gathers consecutive ranges of a mesh that keeps growing.
+struct GatherScratch {
+  struct Entry {
+    uint32_t call = 0;  // the call that last assigned this mesh vertex; 0 never
+    uint32_t local = 0;
+    uint8_t surface = 0;
+  };
+  std::vector<Entry> entries;  // per mesh vertex, one memory access per lookup
+  uint32_t call = 0;
+};
+
 // Fills `out` (reusing its capacity) with triangles [first_triangle, first_triangle +
-// triangle_count) of `mesh`. Validates what it reads: array sizes, the range, indices, surface
-// indices and the finiteness of gathered positions and normals; returns InvalidArgument or
-// OutOfRange naming the offending triangle or vertex. Cost O(triangle_count), plus O(vertex
-// count of the mesh) when the range is large enough that a dense lookup table pays off.
+// triangle_count) of `mesh`; with `scratch`, looks local indices up in its table. Validates what it
+// reads: array sizes, the range, indices, surface indices and the finiteness of gathered positions
+// and normals; returns InvalidArgument or OutOfRange naming the offending triangle or vertex. Cost
+// O(triangle_count), plus O(vertex count of the mesh) when the range is large enough that a dense
+// lookup table pays off.
 absl::Status GatherTriangleRange(const OrderedMesh& mesh, size_t first_triangle,
-                                 size_t triangle_count, GatheredChunk* out);
+                                 size_t triangle_count, GatheredChunk* out,
+                                 GatherScratch* scratch = nullptr);
 
 }  // namespace isostream::internal

@@ -38,13 +38,14 @@ bool ReadVarint32(const uint8_t** p, const uint8_t* end, uint32_t* value) {
   return false;
 }
 
-int AddAttribute(draco::Mesh* mesh, draco::GeometryAttribute::Type type, int components,
+int AddAttribute(draco::PointCloud* points, draco::GeometryAttribute::Type type, int components,
                  draco::DataType data_type, bool normalized, const void* values,
                  size_t value_bytes) {
   auto attribute = std::make_unique<draco::PointAttribute>();
-  attribute->Init(type, static_cast<int8_t>(components), data_type, normalized, mesh->num_points());
+  attribute->Init(type, static_cast<int8_t>(components), data_type, normalized,
+                  points->num_points());
   attribute->buffer()->Write(0, values, value_bytes);
-  return mesh->AddAttribute(std::move(attribute));
+  return points->AddAttribute(std::move(attribute));
 }
 
 bool IsZero(const float* v) { return v[0] == 0.0f && v[1] == 0.0f && v[2] == 0.0f; }
@@ -112,22 +113,22 @@ absl::Status CheckInsideBox(const GatheredChunk& chunk, const QuantizationBox& b
   return absl::OkStatus();
 }
 
-absl::Status EncodeDracoMesh(const GatheredChunk& chunk, const DracoEncodeSettings& settings,
-                             std::string* out, DracoAttributeIds* ids) {
-  const size_t vertex_count = chunk.vertex_count();
-  const size_t triangle_count = chunk.triangle_count();
-  const bool has_normals = !chunk.normals.empty();
+namespace {
 
-  // build the Draco mesh: one value per point (identity mapping), faces in chunk order
-  draco::Mesh mesh;
-  mesh.set_num_points(static_cast<uint32_t>(vertex_count));
+// Adds the chunk's vertex attributes to `points` (whose point count must be set): one value per
+// point (identity mapping), in chunk order.
+DracoAttributeIds AddChunkAttributes(const GatheredChunk& chunk,
+                                     const DracoEncodeSettings& settings,
+                                     draco::PointCloud* points) {
+  const size_t vertex_count = chunk.vertex_count();
+  const bool has_normals = !chunk.normals.empty();
   DracoAttributeIds attribute_ids;
   attribute_ids.position =
-      AddAttribute(&mesh, draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32, false,
+      AddAttribute(points, draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32, false,
                    chunk.positions.data(), chunk.positions.size() * sizeof(float));
   if (has_normals) {
     attribute_ids.normal =
-        AddAttribute(&mesh, draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false,
+        AddAttribute(points, draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false,
                      chunk.normals.data(), chunk.normals.size() * sizeof(float));
   }
   std::vector<uint8_t> tags(chunk.vertex_surface);
@@ -136,8 +137,8 @@ absl::Status EncodeDracoMesh(const GatheredChunk& chunk, const DracoEncodeSettin
       if (IsZero(&chunk.normals[3 * v])) tags[v] |= kUndefinedNormalBit;
     }
   }
-  attribute_ids.surface = AddAttribute(&mesh, draco::GeometryAttribute::GENERIC, 1, draco::DT_UINT8,
-                                       false, tags.data(), tags.size());
+  attribute_ids.surface = AddAttribute(points, draco::GeometryAttribute::GENERIC, 1,
+                                       draco::DT_UINT8, false, tags.data(), tags.size());
   if (!settings.surface_colors.empty()) {
     std::vector<uint8_t> colors(4 * vertex_count, 255);
     for (size_t v = 0; v < vertex_count; ++v) {
@@ -146,9 +147,38 @@ absl::Status EncodeDracoMesh(const GatheredChunk& chunk, const DracoEncodeSettin
         std::copy_n(settings.surface_colors[surface].data(), 4, &colors[4 * v]);
       }
     }
-    attribute_ids.color = AddAttribute(&mesh, draco::GeometryAttribute::COLOR, 4, draco::DT_UINT8,
+    attribute_ids.color = AddAttribute(points, draco::GeometryAttribute::COLOR, 4, draco::DT_UINT8,
                                        true, colors.data(), colors.size());
   }
+  return attribute_ids;
+}
+
+void ConfigureQuantization(const DracoEncodeSettings& settings, bool has_normals,
+                           draco::Encoder* encoder) {
+  if (settings.position_bits > 0) {
+    if (settings.position_box) {
+      encoder->SetAttributeExplicitQuantization(
+          draco::GeometryAttribute::POSITION, settings.position_bits, 3,
+          settings.position_box->origin, settings.position_box->range);
+    } else {
+      encoder->SetAttributeQuantization(draco::GeometryAttribute::POSITION, settings.position_bits);
+    }
+  }
+  if (has_normals && settings.normal_bits > 0) {
+    encoder->SetAttributeQuantization(draco::GeometryAttribute::NORMAL, settings.normal_bits);
+  }
+}
+
+}  // namespace
+
+absl::Status EncodeDracoMesh(const GatheredChunk& chunk, const DracoEncodeSettings& settings,
+                             std::string* out, DracoAttributeIds* ids) {
+  const size_t triangle_count = chunk.triangle_count();
+  const bool has_normals = !chunk.normals.empty();
+
+  draco::Mesh mesh;
+  mesh.set_num_points(static_cast<uint32_t>(chunk.vertex_count()));
+  const DracoAttributeIds attribute_ids = AddChunkAttributes(chunk, settings, &mesh);
   mesh.SetNumFaces(triangle_count);
   for (size_t t = 0; t < triangle_count; ++t) {
     const uint32_t* corner = &chunk.triangles[3 * t];
@@ -160,18 +190,7 @@ absl::Status EncodeDracoMesh(const GatheredChunk& chunk, const DracoEncodeSettin
   // encode: sequential keeps face, corner and point order exactly as built above
   draco::Encoder encoder;
   encoder.SetEncodingMethod(draco::MESH_SEQUENTIAL_ENCODING);
-  if (settings.position_bits > 0) {
-    if (settings.position_box) {
-      encoder.SetAttributeExplicitQuantization(
-          draco::GeometryAttribute::POSITION, settings.position_bits, 3,
-          settings.position_box->origin, settings.position_box->range);
-    } else {
-      encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION, settings.position_bits);
-    }
-  }
-  if (has_normals && settings.normal_bits > 0) {
-    encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, settings.normal_bits);
-  }
+  ConfigureQuantization(settings, has_normals, &encoder);
   encoder.options().SetGlobalBool("compress_connectivity", settings.compress_connectivity);
   draco::EncoderBuffer buffer;
   const draco::Status status = encoder.EncodeMeshToBuffer(mesh, &buffer);
@@ -189,6 +208,24 @@ absl::Status EncodeDracoMesh(const GatheredChunk& chunk, const DracoEncodeSettin
                      ? static_cast<int>(mesh.attribute(attribute_ids.color)->unique_id())
                      : -1;
   }
+  return absl::OkStatus();
+}
+
+absl::Status EncodeDracoPoints(const GatheredChunk& chunk, const DracoEncodeSettings& settings,
+                               std::string* out) {
+  draco::PointCloud points;
+  points.set_num_points(static_cast<uint32_t>(chunk.vertex_count()));
+  AddChunkAttributes(chunk, settings, &points);
+  draco::Encoder encoder;
+  // Sequential keeps point order (the kd-tree method, Draco's other one, sorts the points).
+  encoder.SetEncodingMethod(draco::POINT_CLOUD_SEQUENTIAL_ENCODING);
+  ConfigureQuantization(settings, !chunk.normals.empty(), &encoder);
+  draco::EncoderBuffer buffer;
+  const draco::Status status = encoder.EncodePointCloudToBuffer(points, &buffer);
+  if (!status.ok()) {
+    return absl::InternalError(absl::StrCat("Draco encoding failed: ", status.error_msg()));
+  }
+  out->append(buffer.data(), buffer.size());
   return absl::OkStatus();
 }
 
@@ -218,6 +255,118 @@ absl::Status ReadDracoSequentialCounts(const char* data, size_t size, uint32_t* 
   }
   return absl::OkStatus();
 }
+
+absl::Status ReadDracoPointCloudCount(const char* data, size_t size, uint32_t* point_count) {
+  if (size < kDracoHeaderSize || std::memcmp(data, "DRACO", 5) != 0) {
+    return absl::DataLossError("vertex payload is not a Draco bitstream");
+  }
+  const auto* bytes = reinterpret_cast<const uint8_t*>(data);
+  if (bytes[5] != draco::kDracoPointCloudBitstreamVersionMajor ||
+      bytes[6] != draco::kDracoPointCloudBitstreamVersionMinor) {
+    return absl::DataLossError(absl::StrCat("unsupported Draco point cloud bitstream version ",
+                                            int{bytes[5]}, ".", int{bytes[6]}));
+  }
+  if (bytes[7] != draco::POINT_CLOUD || bytes[8] != draco::POINT_CLOUD_SEQUENTIAL_ENCODING) {
+    return absl::DataLossError(
+        "Draco vertex payload is not a sequentially encoded point cloud (others reorder points)");
+  }
+  const uint16_t flags = static_cast<uint16_t>(bytes[9] | (bytes[10] << 8));
+  if (flags & kDracoMetadataFlag) return absl::DataLossError("Draco payload carries metadata");
+  // The sequential point cloud decoder reads the count as a little-endian int32.
+  if (size < kDracoHeaderSize + 4) {
+    return absl::DataLossError("Draco payload ends inside its point count");
+  }
+  int32_t count;
+  std::memcpy(&count, data + kDracoHeaderSize, 4);
+  if (count < 0) return absl::DataLossError("Draco payload declares a negative point count");
+  *point_count = static_cast<uint32_t>(count);
+  return absl::OkStatus();
+}
+
+namespace {
+
+// A decoded chunk, checked, before it is appended.
+struct DecodedChunk {
+  std::vector<float> positions;
+  std::vector<float> normals;  // empty when the chunk has none
+  std::vector<uint8_t> tags;   // per vertex: surface | kUndefinedNormalBit
+  std::vector<uint32_t> triangles;
+  std::vector<uint8_t> triangle_surface;
+};
+
+// Copies the chunk attributes out of a decoded Draco mesh or point cloud.
+absl::Status ReadVertexAttributes(const draco::PointCloud& points, uint32_t vertex_count,
+                                  bool expect_normals, DecodedChunk* out) {
+  const draco::PointAttribute* position =
+      points.GetNamedAttribute(draco::GeometryAttribute::POSITION);
+  const draco::PointAttribute* normal = points.GetNamedAttribute(draco::GeometryAttribute::NORMAL);
+  const draco::PointAttribute* surface =
+      points.GetNamedAttribute(draco::GeometryAttribute::GENERIC);
+  if (!HasLayout(position, 3, draco::DT_FLOAT32) || !HasLayout(surface, 1, draco::DT_UINT8)) {
+    return absl::DataLossError(
+        "Draco payload lacks float32 x3 POSITION or uint8 surface attribute");
+  }
+  if (expect_normals != (normal != nullptr) ||
+      (normal && !HasLayout(normal, 3, draco::DT_FLOAT32))) {
+    return absl::DataLossError(expect_normals
+                                   ? "Draco payload lacks the float32 x3 NORMAL attribute"
+                                   : "Draco payload has normals the header does not declare");
+  }
+  out->positions.resize(3 * size_t{vertex_count});
+  out->normals.resize(expect_normals ? 3 * size_t{vertex_count} : 0);
+  out->tags.resize(vertex_count);
+  if (!CopyPointValues(*position, vertex_count, 3, out->positions.data()) ||
+      !CopyPointValues(*surface, vertex_count, 1, out->tags.data()) ||
+      (normal && !CopyPointValues(*normal, vertex_count, 3, out->normals.data()))) {
+    return absl::DataLossError("Draco attribute values do not cover every point");
+  }
+  if (expect_normals) {
+    for (uint32_t v = 0; v < vertex_count; ++v) {
+      if (out->tags[v] & kUndefinedNormalBit) std::fill_n(&out->normals[3 * size_t{v}], 3, 0.0f);
+    }
+  }
+  return absl::OkStatus();
+}
+
+// Checks that each triangle's corners agree on a valid surface and records it.
+absl::Status AssignTriangleSurfaces(DecodedChunk* chunk) {
+  const size_t triangle_count = chunk->triangles.size() / 3;
+  chunk->triangle_surface.resize(triangle_count);
+  for (size_t t = 0; t < triangle_count; ++t) {
+    const uint32_t* corner = &chunk->triangles[3 * t];
+    const uint8_t s = chunk->tags[corner[0]] & kSurfaceMask;
+    if ((chunk->tags[corner[1]] & kSurfaceMask) != s ||
+        (chunk->tags[corner[2]] & kSurfaceMask) != s || s >= kMaxSurfaces) {
+      return absl::DataLossError(absl::StrCat("face ", t, " has inconsistent or invalid surface"));
+    }
+    chunk->triangle_surface[t] = s;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Append(const DecodedChunk& chunk, OrderedMesh* append_to) {
+  const size_t vertex_count = chunk.tags.size();
+  const size_t offset = append_to->vertex_count();
+  if (offset + vertex_count >= std::numeric_limits<uint32_t>::max()) {
+    return absl::OutOfRangeError("decoded mesh would exceed 2^32 - 1 vertices");
+  }
+  append_to->normals.resize(3 * offset, 0.0f);  // back-fill a mesh that had no normals
+  append_to->positions.insert(append_to->positions.end(), chunk.positions.begin(),
+                              chunk.positions.end());
+  if (!chunk.normals.empty()) {
+    append_to->normals.insert(append_to->normals.end(), chunk.normals.begin(), chunk.normals.end());
+  } else {
+    append_to->normals.resize(append_to->positions.size(), 0.0f);
+  }
+  append_to->triangles.reserve(append_to->triangles.size() + chunk.triangles.size());
+  for (uint32_t index : chunk.triangles)
+    append_to->triangles.push_back(static_cast<uint32_t>(offset + index));
+  append_to->surface.insert(append_to->surface.end(), chunk.triangle_surface.begin(),
+                            chunk.triangle_surface.end());
+  return absl::OkStatus();
+}
+
+}  // namespace
 
 absl::Status DecodeDracoMesh(const char* data, size_t size, uint32_t triangle_count,
                              uint32_t vertex_count, bool expect_normals, OrderedMesh* append_to) {
@@ -256,68 +405,52 @@ absl::Status DecodeDracoMesh(const char* data, size_t size, uint32_t triangle_co
     return absl::DataLossError("Draco decoded a different number of faces or points than declared");
   }
 
-  // check and read attributes into scratch before touching append_to
-  const draco::PointAttribute* position =
-      mesh.GetNamedAttribute(draco::GeometryAttribute::POSITION);
-  const draco::PointAttribute* normal = mesh.GetNamedAttribute(draco::GeometryAttribute::NORMAL);
-  const draco::PointAttribute* surface = mesh.GetNamedAttribute(draco::GeometryAttribute::GENERIC);
-  if (!HasLayout(position, 3, draco::DT_FLOAT32) || !HasLayout(surface, 1, draco::DT_UINT8)) {
-    return absl::DataLossError(
-        "Draco payload lacks float32 x3 POSITION or uint8 surface attribute");
-  }
-  if (expect_normals != (normal != nullptr) ||
-      (normal && !HasLayout(normal, 3, draco::DT_FLOAT32))) {
-    return absl::DataLossError(expect_normals
-                                   ? "Draco payload lacks the float32 x3 NORMAL attribute"
-                                   : "Draco payload has normals the header does not declare");
-  }
-  std::vector<float> positions(3 * size_t{vertex_count});
-  std::vector<float> normals(expect_normals ? 3 * size_t{vertex_count} : 0);
-  std::vector<uint8_t> tags(vertex_count);
-  if (!CopyPointValues(*position, vertex_count, 3, positions.data()) ||
-      !CopyPointValues(*surface, vertex_count, 1, tags.data()) ||
-      (normal && !CopyPointValues(*normal, vertex_count, 3, normals.data()))) {
-    return absl::DataLossError("Draco attribute values do not cover every point");
-  }
-  std::vector<uint32_t> triangles(3 * size_t{triangle_count});
-  std::vector<uint8_t> triangle_surface(triangle_count);
+  // check and read everything into scratch before touching append_to
+  DecodedChunk chunk;
+  ISOSTREAM_RETURN_IF_ERROR(ReadVertexAttributes(mesh, vertex_count, expect_normals, &chunk));
+  chunk.triangles.resize(3 * size_t{triangle_count});
   for (uint32_t t = 0; t < triangle_count; ++t) {
     const draco::Mesh::Face& face = mesh.face(draco::FaceIndex(t));
     for (int c = 0; c < 3; ++c) {
       const uint32_t v = face[c].value();
       if (v >= vertex_count)
         return absl::DataLossError(absl::StrCat("face ", t, " index out of range"));
-      triangles[3 * size_t{t} + c] = v;
+      chunk.triangles[3 * size_t{t} + c] = v;
     }
-    const uint8_t s = tags[triangles[3 * size_t{t}]] & kSurfaceMask;
-    if ((tags[triangles[3 * size_t{t} + 1]] & kSurfaceMask) != s ||
-        (tags[triangles[3 * size_t{t} + 2]] & kSurfaceMask) != s || s >= kMaxSurfaces) {
-      return absl::DataLossError(absl::StrCat("face ", t, " has inconsistent or invalid surface"));
-    }
-    triangle_surface[t] = s;
   }
+  ISOSTREAM_RETURN_IF_ERROR(AssignTriangleSurfaces(&chunk));
+  return Append(chunk, append_to);
+}
 
-  // append
-  const size_t offset = append_to->vertex_count();
-  if (offset + vertex_count >= std::numeric_limits<uint32_t>::max()) {
-    return absl::OutOfRangeError("decoded mesh would exceed 2^32 - 1 vertices");
+absl::Status DecodeDracoPoints(const char* data, size_t size, std::vector<uint32_t> triangles,
+                               uint32_t vertex_count, bool expect_normals, OrderedMesh* append_to) {
+  uint32_t draco_points = 0;
+  ISOSTREAM_RETURN_IF_ERROR(ReadDracoPointCloudCount(data, size, &draco_points));
+  if (draco_points != vertex_count) {
+    return absl::DataLossError(
+        absl::StrCat("Draco payload holds ", draco_points, " points; expected ", vertex_count));
   }
-  append_to->normals.resize(3 * offset, 0.0f);  // back-fill a mesh that had no normals
-  append_to->positions.insert(append_to->positions.end(), positions.begin(), positions.end());
-  if (expect_normals) {
-    for (uint32_t v = 0; v < vertex_count; ++v) {
-      if (tags[v] & kUndefinedNormalBit) std::fill_n(&normals[3 * size_t{v}], 3, 0.0f);
-    }
-    append_to->normals.insert(append_to->normals.end(), normals.begin(), normals.end());
-  } else {
-    append_to->normals.resize(append_to->positions.size(), 0.0f);
+  draco::DecoderBuffer buffer;
+  buffer.Init(data, size);
+  draco::Decoder decoder;
+  draco::StatusOr<std::unique_ptr<draco::PointCloud>> decoded =
+      decoder.DecodePointCloudFromBuffer(&buffer);
+  if (!decoded.ok()) {
+    return absl::DataLossError(
+        absl::StrCat("Draco decoding failed: ", decoded.status().error_msg()));
   }
-  append_to->triangles.reserve(append_to->triangles.size() + triangles.size());
-  for (uint32_t index : triangles)
-    append_to->triangles.push_back(static_cast<uint32_t>(offset + index));
-  append_to->surface.insert(append_to->surface.end(), triangle_surface.begin(),
-                            triangle_surface.end());
-  return absl::OkStatus();
+  if (decoded.value()->num_points() != vertex_count) {
+    return absl::DataLossError("Draco decoded a different number of points than declared");
+  }
+  DecodedChunk chunk;
+  ISOSTREAM_RETURN_IF_ERROR(
+      ReadVertexAttributes(*decoded.value(), vertex_count, expect_normals, &chunk));
+  for (uint32_t v : triangles) {
+    if (v >= vertex_count) return absl::DataLossError("triangle index out of range");
+  }
+  chunk.triangles = std::move(triangles);
+  ISOSTREAM_RETURN_IF_ERROR(AssignTriangleSurfaces(&chunk));
+  return Append(chunk, append_to);
 }
 
 }  // namespace isostream::internal

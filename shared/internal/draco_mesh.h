@@ -50,11 +50,21 @@ absl::Status CheckInsideBox(const GatheredChunk& chunk, const QuantizationBox& b
 absl::Status EncodeDracoMesh(const GatheredChunk& chunk, const DracoEncodeSettings& settings,
                              std::string* out, DracoAttributeIds* ids);
 
+// Appends the vertex attributes of `chunk` (at least one vertex) to `out` as a Draco point
+// cloud written with POINT_CLOUD_SEQUENTIAL_ENCODING (point order kept), with the same
+// attributes and quantization as EncodeDracoMesh.
+absl::Status EncodeDracoPoints(const GatheredChunk& chunk, const DracoEncodeSettings& settings,
+                               std::string* out);
+
 // Reads Draco's own header at the start of data[0, size): must be a triangular mesh written
 // with sequential encoding and no metadata. Returns its face and point counts, so callers can
 // compare them with what they expect before Draco allocates for them.
 absl::Status ReadDracoSequentialCounts(const char* data, size_t size, uint32_t* face_count,
                                        uint32_t* point_count);
+
+// As ReadDracoSequentialCounts for a point cloud written by EncodeDracoPoints: checks the
+// header (sequential point cloud, no metadata) and returns its point count.
+absl::Status ReadDracoPointCloudCount(const char* data, size_t size, uint32_t* point_count);
 
 // Decodes the Draco mesh in data[0, size), which must hold exactly `triangle_count` faces and
 // `vertex_count` points (checked against Draco's header before decoding) and a NORMAL
@@ -63,5 +73,12 @@ absl::Status ReadDracoSequentialCounts(const char* data, size_t size, uint32_t* 
 // shorter than 3 bytes per face by decoding from a zero-padded copy when needed.
 absl::Status DecodeDracoMesh(const char* data, size_t size, uint32_t triangle_count,
                              uint32_t vertex_count, bool expect_normals, OrderedMesh* append_to);
+
+// Decodes the point cloud in data[0, size) written by EncodeDracoPoints, which must hold
+// exactly `vertex_count` points (checked against Draco's header before decoding) and a NORMAL
+// attribute iff `expect_normals`, and appends it with `triangles` (local indices, 3 per
+// triangle) to `append_to` as DecodeDracoMesh does; on error `append_to` is unchanged.
+absl::Status DecodeDracoPoints(const char* data, size_t size, std::vector<uint32_t> triangles,
+                               uint32_t vertex_count, bool expect_normals, OrderedMesh* append_to);
 
 }  // namespace isostream::internal

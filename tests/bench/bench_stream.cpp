@@ -3,13 +3,16 @@
 // in-process isostreamd service on 127.0.0.1, the client library on the other end).
 //
 //   bench_stream [SPEC] [TRIANGLES] [VIEWS]      default: cayley:257 1000000 7
+// VIEWS 0 prints the codec figures only.
 #include <grpcpp/grpcpp.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -30,6 +33,15 @@ double Ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
+// CPU time of this process (server and client threads), ms: steadier than wall time on a
+// shared machine.
+double CpuMs() {
+  rusage u;
+  getrusage(RUSAGE_SELF, &u);
+  return 1e3 * (u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
+         1e-3 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.empty() ? 0 : v[v.size() / 2];
@@ -42,57 +54,141 @@ glm::dvec3 Eye(int i) {
   return {3.5 * std::cos(a), 1.8 + 0.2 * (i % 3), 3.5 * std::sin(a)};
 }
 
+// Encodes `mesh` in 64k-triangle chunks with `encode` and decodes every chunk; returns bytes
+// per triangle and encode/decode ms per million triangles.
+struct CodecRun {
+  double bytes_per_triangle = 0, encode_ms = 0, decode_ms = 0;
+  bool ok = false;
+};
+
+template <typename EncodeFn>
+CodecRun RunCodec(const OrderedMesh& mesh, EncodeFn encode, size_t chunk = 65536) {
+  CodecRun run;
+  size_t bytes = 0;
+  std::string out;
+  OrderedMesh decoded;
+  for (size_t first = 0; first < mesh.triangle_count(); first += chunk) {
+    const size_t n = std::min<size_t>(chunk, mesh.triangle_count() - first);
+    const auto t0 = Clock::now();
+    const absl::Status s = encode(first, n, &out);
+    const auto t1 = Clock::now();
+    if (!s.ok()) {
+      std::printf("encode failed: %s\n", std::string(s.message()).c_str());
+      return run;
+    }
+    if (!DecodeAnyChunk(out.data(), out.size(), &decoded).ok()) {
+      std::printf("decode failed\n");
+      return run;
+    }
+    run.encode_ms += Ms(t0, t1);
+    run.decode_ms += Ms(t1, Clock::now());
+    bytes += out.size();
+  }
+  const double per_m = 1e6 / double(mesh.triangle_count());
+  run.bytes_per_triangle = double(bytes) / mesh.triangle_count();
+  run.encode_ms *= per_m;
+  run.decode_ms *= per_m;
+  run.ok = true;
+  return run;
+}
+
+// Where the bytes of the default codec go: header, Draco point cloud (positions, normals,
+// surface index) and connectivity, per triangle. Normals and surface are measured by encoding
+// without them (no normals; every triangle on surface 0).
+void CodecBreakdown(const OrderedMesh& mesh, const CodecOptions& options) {
+  double header = 0, points = 0, connectivity = 0, no_normals_points = 0, one_surface_points = 0;
+  OrderedMesh bare = mesh;
+  bare.normals.clear();
+  OrderedMesh one_surface = mesh;
+  std::fill(one_surface.surface.begin(), one_surface.surface.end(), 0);
+  std::string out;
+  for (size_t first = 0; first < mesh.triangle_count(); first += 65536) {
+    const size_t n = std::min<size_t>(65536, mesh.triangle_count() - first);
+    uint32_t points_size = 0;
+    if (!EncodeChunk(mesh, first, n, options, &out).ok()) return;
+    std::memcpy(&points_size, out.data() + kChunkHeaderSize, 4);
+    header += kChunkHeaderSize + 4;
+    points += points_size;
+    connectivity += out.size() - kChunkHeaderSize - 4 - points_size;
+    if (!EncodeChunk(bare, first, n, options, &out).ok()) return;
+    std::memcpy(&points_size, out.data() + kChunkHeaderSize, 4);
+    no_normals_points += points_size;
+    if (!EncodeChunk(one_surface, first, n, options, &out).ok()) return;
+    std::memcpy(&points_size, out.data() + kChunkHeaderSize, 4);
+    one_surface_points += points_size;
+  }
+  const double t = double(mesh.triangle_count());
+  std::printf(
+      "  default codec by part (B/tri): connectivity %.3f, vertex attributes %.3f (normals "
+      "%.3f, surface index %.3f, positions and Draco framing %.3f), chunk headers %.4f\n",
+      connectivity / t, points / t, (points - no_normals_points) / t,
+      (points - one_surface_points) / t, (no_normals_points - (points - one_surface_points)) / t,
+      header / t);
+}
+
 void CodecFigures(const OrderedMesh& mesh, const Volume& volume) {
   QuantizationBox box;
   int bits;
   service::QuantizationFor(volume, &box, &bits);
+  const double voxel = std::min({volume.spacing[0], volume.spacing[1], volume.spacing[2]});
   std::printf(
       "\ncodec on the frame: %zu triangles, %zu vertices, normals and surface index, "
-      "64k-triangle chunks, positions %d bits on the volume box (error %.2g, 1/64 "
-      "voxel), normals 10 bits\n",
-      mesh.triangle_count(), mesh.vertex_count(), bits, PositionErrorBound(box, bits));
-  std::printf("  %-34s %10s %12s %12s\n", "codec", "bytes/tri", "encode ms/1M", "decode ms/1M");
+      "64k-triangle chunks, positions %d bits on the volume box (max error %.2g = %.4f voxel), "
+      "normals 10 bits (max error %.2g rad)\n",
+      mesh.triangle_count(), mesh.vertex_count(), bits, PositionErrorBound(box, bits),
+      PositionErrorBound(box, bits) / voxel, NormalErrorBound(10));
+  std::printf("  %-40s %10s %12s %12s\n", "codec", "bytes/tri", "encode ms/1M", "decode ms/1M");
+  using Connectivity = CodecOptions::Connectivity;
   struct Variant {
     const char* name;
     bool raw;
+    Connectivity connectivity;
     bool compress;
     int position_bits_less;  // below the daemon's choice
     int normal_bits;
   };
-  for (const Variant& v :
-       {Variant{"draco sequential + connectivity", false, true, 0, 10},
-        Variant{"draco sequential", false, false, 0, 10}, Variant{"raw", true, false, 0, 0},
-        Variant{"  + conn, positions 1/32 voxel", false, true, 1, 10},
-        Variant{"  + conn, normals 8 bits", false, true, 0, 8},
-        Variant{"  + conn, 1/32 voxel, normals 8", false, true, 1, 8}}) {
+  for (const Variant& v : {
+           Variant{"edge cache (default)", false, Connectivity::kEdgeCache, true, 0, 10},
+           Variant{"draco sequential + connectivity", false, Connectivity::kDracoSequential, true,
+                   0, 10},
+           Variant{"draco sequential", false, Connectivity::kDracoSequential, false, 0, 10},
+           Variant{"raw", true, Connectivity::kEdgeCache, false, 0, 0},
+           Variant{"edge cache, positions 1/32 voxel", false, Connectivity::kEdgeCache, true, 1,
+                   10},
+           Variant{"edge cache, normals 8 bits", false, Connectivity::kEdgeCache, true, 0, 8},
+           Variant{"edge cache, 1/32 voxel, normals 8", false, Connectivity::kEdgeCache, true, 1,
+                   8},
+           Variant{"draco seq + conn, 1/32 voxel, normals 8", false, Connectivity::kDracoSequential,
+                   true, 1, 8},
+       }) {
     CodecOptions o;
+    o.connectivity = v.connectivity;
     o.position_bits = bits - v.position_bits_less;
     o.normal_bits = v.normal_bits;
     o.compress_connectivity = v.compress;
     o.position_box = box;
-    size_t bytes = 0;
-    double encode_ms = 0, decode_ms = 0;
-    std::string out;
-    OrderedMesh decoded;
-    for (size_t first = 0; first < mesh.triangle_count(); first += 65536) {
-      const size_t n = std::min<size_t>(65536, mesh.triangle_count() - first);
-      const auto t0 = Clock::now();
-      const absl::Status s =
-          v.raw ? EncodeChunkRaw(mesh, first, n, &out) : EncodeChunk(mesh, first, n, o, &out);
-      const auto t1 = Clock::now();
-      if (!s.ok()) {
-        std::printf("encode failed: %s\n", std::string(s.message()).c_str());
-        return;
-      }
-      if (!DecodeAnyChunk(out.data(), out.size(), &decoded).ok()) std::printf("decode failed\n");
-      encode_ms += Ms(t0, t1);
-      decode_ms += Ms(t1, Clock::now());
-      bytes += out.size();
-    }
-    const double per_m = 1e6 / double(mesh.triangle_count());
-    std::printf("  %-34s %10.2f %12.1f %12.1f\n", v.name, double(bytes) / mesh.triangle_count(),
-                encode_ms * per_m, decode_ms * per_m);
+    const CodecRun run = RunCodec(mesh, [&](size_t first, size_t n, std::string* out) {
+      return v.raw ? EncodeChunkRaw(mesh, first, n, out) : EncodeChunk(mesh, first, n, o, out);
+    });
+    if (!run.ok) return;
+    std::printf("  %-40s %10.2f %12.1f %12.1f\n", v.name, run.bytes_per_triangle, run.encode_ms,
+                run.decode_ms);
   }
+  CodecOptions o;
+  o.position_bits = bits;
+  o.position_box = box;
+  CodecBreakdown(mesh, o);
+  std::printf("  default codec by chunk size (B/tri):");
+  for (size_t chunk : {4096, 8192, 16384, 32768, 65536}) {
+    const CodecRun run = RunCodec(
+        mesh,
+        [&](size_t first, size_t n, std::string* out) {
+          return EncodeChunk(mesh, first, n, o, out);
+        },
+        chunk);
+    std::printf(" %zuk %.2f", chunk / 1024, run.bytes_per_triangle);
+  }
+  std::printf("\n");
 }
 
 struct ViewTiming {
@@ -153,6 +249,7 @@ int main(int argc, char** argv) {
       spec.c_str(), (long long)target, eps, (long long)frame->stats.triangles,
       frame->stats.total_ms);
   CodecFigures(frame->mesh, *prepared->volume);
+  if (views < 1) return 0;
 
   // The daemon's service in this process, on a free loopback port.
   service::DaemonConfig config;
@@ -176,14 +273,15 @@ int main(int argc, char** argv) {
       "\nview change -> frame at the client over loopback gRPC (eps %.4g, %d views, "
       "median [min]; extract ms: the server's extraction alone)\n",
       eps, views);
-  std::printf("  %-7s %-8s %10s %16s %16s %12s %10s\n", "codec", "decoded", "triangles",
-              "first chunk ms", "complete ms", "extract ms", "bytes/tri");
+  std::printf("  %-7s %-8s %10s %16s %16s %12s %10s %8s\n", "codec", "decoded", "triangles",
+              "first chunk ms", "complete ms", "extract ms", "bytes/tri", "cpu ms");
   for (pb::Codec codec : {pb::DRACO, pb::RAW}) {
     for (bool decode : {false, true}) {
       auto session = (*client)->OpenSession();
       if (!session.ok()) return 1;
       std::vector<double> first, complete, extract;
       ViewTiming t{};
+      double cpu_start = 0;
       for (int i = -1; i < views; ++i) {  // view -1 warms the volume and the connection
         pb::ViewRequest v;
         v.set_volume(spec);
@@ -199,16 +297,20 @@ int main(int argc, char** argv) {
           std::fprintf(stderr, "bench_stream: view failed\n");
           return 1;
         }
-        if (i < 0) continue;
+        if (i < 0) {
+          cpu_start = CpuMs();
+          continue;
+        }
         first.push_back(t.first_chunk_ms);
         complete.push_back(t.complete_ms);
         extract.push_back(t.server_extract_ms);
       }
-      std::printf("  %-7s %-8s %10lld %8.1f [%5.1f] %8.1f [%5.1f] %12.1f %10.2f\n",
+      const double cpu_per_view = (CpuMs() - cpu_start) / views;
+      std::printf("  %-7s %-8s %10lld %8.1f [%5.1f] %8.1f [%5.1f] %12.1f %10.2f %8.0f\n",
                   codec == pb::RAW ? "raw" : "draco", decode ? "yes" : "no", (long long)t.triangles,
                   Median(first), *std::min_element(first.begin(), first.end()), Median(complete),
                   *std::min_element(complete.begin(), complete.end()), Median(extract),
-                  double(t.bytes) / double(std::max<int64_t>(1, t.triangles)));
+                  double(t.bytes) / double(std::max<int64_t>(1, t.triangles)), cpu_per_view);
       (*session)->CloseSend().IgnoreError();
       (*session)->Finish().IgnoreError();
     }

@@ -602,6 +602,121 @@ TEST_F(ImpatientDaemon, SlowFrameIsDeadlineExceeded) {
   EXPECT_TRUE(health.ok() && *health);
 }
 
+// --idle-timeout-s 1: a session with no request and nothing in flight for a second is ended
+// by the server; sessions that keep asking are not, and the daemon keeps serving.
+class IdleDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start(
+        {"--idle-timeout-s", "1", "--threads", "2", "--cache-dir", scratch_->path() + "/cache"},
+        scratch_->path() + "/isostreamd.log"));
+  }
+
+  // Sends a small view and reads its frame to the end.
+  static bool SmallFrame(net::Session* s, uint64_t id) {
+    if (!s->Send(MakeView("buckyball:65", id, 0.05, glm::dvec3(2, 2, 2))).ok()) return false;
+    net::FrameAssembler a;
+    pb::FrameChunk chunk;
+    while (!a.complete() && s->Read(&chunk)) {
+      if (!a.Add(chunk).ok()) return false;
+    }
+    return a.complete();
+  }
+};
+
+TEST_F(IdleDaemon, IdleSessionsAreClosedBusyOnesAreNot) {
+  using Clock = std::chrono::steady_clock;
+  auto c = Connect();
+  const auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  auto idle = c->OpenSession();
+  auto busy = c->OpenSession();
+  auto silent = c->OpenSession();  // never sends a view
+  ASSERT_TRUE(idle.ok() && busy.ok() && silent.ok());
+  ASSERT_TRUE(SmallFrame(idle->get(), 1));
+  const auto idle_since = Clock::now();
+  ASSERT_TRUE(SmallFrame(busy->get(), 1));
+  // Not closed early (checked only if this machine got here well within the timeout).
+  const auto early = c->GetServerStats();
+  ASSERT_TRUE(early.ok());
+  if (Clock::now() - idle_since < std::chrono::milliseconds(800)) {
+    EXPECT_EQ(early->sessions_idle_closed(), before->sessions_idle_closed());
+  }
+  // `busy` asks every 0.3 s for 2.4 s; `idle` and `silent` say nothing.
+  for (uint64_t id = 2; id < 10; ++id) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    ASSERT_TRUE(SmallFrame(busy->get(), id)) << "view " << id;
+  }
+  const auto after_busy = Clock::now();
+  pb::ServerStats stats;
+  ASSERT_TRUE(WaitForStats(
+      c.get(),
+      [&](const pb::ServerStats& st) {
+        return st.sessions_idle_closed() == before->sessions_idle_closed() + 2 &&
+               st.sessions_open() == before->sessions_open() + 1;  // busy
+      },
+      &stats));
+  // Both ended a second after going idle (checked every 0.1 s), so already, 2.4 s in.
+  EXPECT_LT(Clock::now() - after_busy, std::chrono::milliseconds(500));
+  for (auto* session : {idle->get(), silent->get()}) {
+    pb::FrameChunk chunk;
+    EXPECT_FALSE(session->Read(&chunk));
+    const absl::Status status = session->Finish();
+    EXPECT_EQ(status.code(), absl::StatusCode::kDeadlineExceeded) << status;
+    EXPECT_NE(status.message().find("session idle for 1 s"), absl::string_view::npos) << status;
+  }
+  // The busy session still works, then ends normally; a new session is served.
+  ASSERT_TRUE(SmallFrame(busy->get(), 10));
+  ASSERT_TRUE((*busy)->CloseSend().ok());
+  EXPECT_TRUE((*busy)->Finish().ok());
+  auto fresh = c->OpenSession();
+  ASSERT_TRUE(fresh.ok());
+  ASSERT_TRUE(SmallFrame(fresh->get(), 1));
+  ASSERT_TRUE((*fresh)->CloseSend().ok());
+  EXPECT_TRUE((*fresh)->Finish().ok());
+  ASSERT_TRUE(WaitForStats(
+      c.get(), [](const pb::ServerStats& st) { return st.sessions_open() == 0; }, &stats));
+  EXPECT_EQ(stats.sessions_idle_closed(), before->sessions_idle_closed() + 2);
+  EXPECT_EQ(stats.sessions_closed(), before->sessions_closed() + 4);
+}
+
+TEST_F(IdleDaemon, AFrameInFlightIsNotIdle) {
+  // A frame too big for the transport's buffers (raw, flat normals: ~60 MB in ~16 chunks), read
+  // at 0.2 s per chunk: the server waits on the client for well over the 1 s timeout, and the
+  // session must not count as idle meanwhile. The idle clock starts after the last chunk.
+  auto c = Connect();
+  const auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  pb::ViewRequest view = MakeView("buckyball:129", 1, 0.0, glm::dvec3(3, 2, 4), pb::RAW);
+  view.set_normals(pb::FLAT);
+  ASSERT_TRUE((*session)->Send(view).ok());
+  const auto start = std::chrono::steady_clock::now();
+  net::FrameAssembler a;
+  pb::FrameChunk chunk;
+  bool checked = false;
+  while (!a.complete() && (*session)->Read(&chunk)) {
+    ASSERT_TRUE(a.Add(chunk).ok());
+    if (!checked && std::chrono::steady_clock::now() - start > std::chrono::milliseconds(2200)) {
+      // Twice the timeout into the frame, with chunks still to come: not closed.
+      auto stats = c->GetServerStats();
+      ASSERT_TRUE(stats.ok());
+      EXPECT_EQ(stats->sessions_idle_closed(), before->sessions_idle_closed());
+      EXPECT_FALSE(chunk.last());
+      checked = true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  ASSERT_TRUE(a.complete());
+  EXPECT_TRUE(checked) << "the frame streamed in under 2.2 s; it no longer tests anything";
+  // Then it is idle: ended within bounded time.
+  const absl::Status status = (*session)->Finish();
+  EXPECT_EQ(status.code(), absl::StatusCode::kDeadlineExceeded) << status;
+}
+
 class TlsDaemon : public Daemon {};
 
 TEST_F(TlsDaemon, ServesOverTls) {

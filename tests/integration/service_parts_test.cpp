@@ -25,13 +25,16 @@ absl::Status LoadText(const std::string& text, DaemonConfig* c) {
 TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
   DaemonConfig c;
   ASSERT_TRUE(LoadText(R"({"listen": "127.0.0.1:9", "volumes": {"a": "sphere:9"},
-                           "limits": {"max_sessions": 2}, "frames": {"chunk_triangles": 1024}})",
+                           "limits": {"max_sessions": 2, "idle_timeout_s": 5},
+                           "frames": {"chunk_triangles": 1024}})",
                        &c)
                   .ok());
   EXPECT_EQ(c.listen, "127.0.0.1:9");
   EXPECT_EQ(c.volumes.at("a"), "sphere:9");
   EXPECT_EQ(c.limits.max_sessions, 2);
+  EXPECT_EQ(c.limits.idle_timeout_s, 5);
   EXPECT_EQ(c.limits.max_isovalues, 16);  // untouched default
+  EXPECT_EQ(DaemonConfig().limits.idle_timeout_s, 300);
   EXPECT_EQ(c.chunk_triangles, 1024);
 
   absl::Status s = LoadText(R"({"limits": {"max_sesions": 2}})", &c);
@@ -48,6 +51,11 @@ TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
   bad = DaemonConfig();
   bad.tls_cert = "cert.pem";  // no key
   EXPECT_FALSE(ValidateConfig(bad).ok());
+  bad = DaemonConfig();
+  bad.limits.idle_timeout_s = -1;
+  EXPECT_FALSE(ValidateConfig(bad).ok());
+  bad.limits.idle_timeout_s = 0;  // off
+  EXPECT_TRUE(ValidateConfig(bad).ok());
   EXPECT_TRUE(ValidateConfig(DaemonConfig()).ok());
 }
 

@@ -1,4 +1,4 @@
-// Frame codec: both codecs keep triangle order and surfaces, Draco stays within its documented
+// Frame codec: all codecs keep triangle order and surfaces, Draco stays within its documented
 // error bounds, chunks append, and malformed or hostile input returns errors without crashing.
 #include <gtest/gtest.h>
 
@@ -86,13 +86,21 @@ OrderedMesh ShuffledBandedGrid() {
   return Shuffled(grid, 1234);
 }
 
+// The Draco chunk variants: edge cache (codec 3, the default), Draco mesh with compressed and
+// with plain indices (codec 2).
+std::vector<CodecOptions> DracoVariants() {
+  CodecOptions edge_cache, compressed, plain;
+  compressed.connectivity = CodecOptions::Connectivity::kDracoSequential;
+  plain.connectivity = CodecOptions::Connectivity::kDracoSequential;
+  plain.compress_connectivity = false;
+  return {edge_cache, compressed, plain};
+}
+
 TEST(MeshCodec, DracoKeepsShuffledTriangleOrder) {
   const OrderedMesh mesh = ShuffledBandedGrid();
   const size_t count = mesh.triangle_count();
   ASSERT_EQ(count, 10082u);
-  for (bool compress : {true, false}) {
-    CodecOptions options;
-    options.compress_connectivity = compress;
+  for (const CodecOptions& options : DracoVariants()) {
     const OrderedMesh decoded = Decode(Encode(mesh, 0, count, options));
     ASSERT_EQ(decoded.triangle_count(), count);
     EXPECT_EQ(decoded.surface, mesh.surface);
@@ -110,6 +118,89 @@ TEST(MeshCodec, RawIsExactAndHasTheSameTopologyAsDraco) {
   EXPECT_EQ(raw.triangles, draco.triangles);
   EXPECT_EQ(raw.surface, draco.surface);
   EXPECT_EQ(raw.vertex_count(), draco.vertex_count());
+}
+
+TEST(MeshCodec, EdgeCacheIsTheDefaultAndDecodesLikeTheDracoMesh) {
+  // Same vertex order and quantization, so every decoded value matches bit for bit.
+  const OrderedMesh sphere = MakeSphere(20000);
+  const OrderedMesh meshes[] = {ShuffledBandedGrid(), sphere, SortedByDepth(sphere, 0),
+                                Shuffled(sphere, 3)};
+  for (const OrderedMesh& mesh : meshes) {
+    const size_t count = mesh.triangle_count();
+    const std::string edge_cache = Encode(mesh, 0, count);
+    const absl::StatusOr<ChunkHeader> header = ReadChunkHeader(edge_cache.data(), kChunkHeaderSize);
+    ASSERT_TRUE(header.ok());
+    EXPECT_EQ(header->codec, ChunkCodec::kDracoEdgeCache);
+    const OrderedMesh decoded = Decode(edge_cache);
+    for (const CodecOptions& options : DracoVariants()) {
+      const OrderedMesh other = Decode(Encode(mesh, 0, count, options));
+      EXPECT_EQ(decoded.triangles, other.triangles);
+      EXPECT_EQ(decoded.surface, other.surface);
+      EXPECT_EQ(decoded.positions, other.positions);
+      EXPECT_EQ(decoded.normals, other.normals);
+    }
+  }
+}
+
+TEST(MeshCodec, EdgeCacheKeepsCornerOrderOfEveryTriangle) {
+  // Each triangle of a grid in all three rotations and both windings, shuffled: edges match
+  // their neighbours forwards, backwards and not at all, and corner order must survive.
+  const OrderedMesh grid = MakeGrid(30);
+  OrderedMesh mesh = grid;
+  mesh.triangles.clear();
+  mesh.surface.clear();
+  for (size_t t = 0; t < grid.triangle_count(); ++t) {
+    const uint32_t* x = &grid.triangles[3 * t];
+    for (int r = 0; r < 3; ++r) {
+      mesh.triangles.insert(mesh.triangles.end(), {x[r], x[(r + 1) % 3], x[(r + 2) % 3]});
+      mesh.triangles.insert(mesh.triangles.end(), {x[r], x[(r + 2) % 3], x[(r + 1) % 3]});
+      mesh.surface.insert(mesh.surface.end(), {uint8_t(t % 3), uint8_t(t % 3)});
+    }
+  }
+  for (const OrderedMesh& m : {mesh, Shuffled(mesh, 17)}) {
+    const size_t count = m.triangle_count();
+    const OrderedMesh decoded = Decode(Encode(m, 0, count));
+    EXPECT_EQ(decoded.surface, m.surface);
+    ExpectSameTrianglesInOrder(m, 0, count, decoded, 0, RangeBound(m, 0, count, 14),
+                               NormalErrorBound(10));
+  }
+}
+
+TEST(MeshCodec, CopiedRangesEncodeToTheSameBytes) {
+  // One copier over consecutive ranges of a mesh that grows between copies, as the frame
+  // producer uses it, then over another mesh: every chunk equals the one-step encoding.
+  const OrderedMesh full = ShuffledBandedGrid();
+  const OrderedMesh other = Shuffled(MakeSphere(3000), 8);
+  ChunkCopier copier;
+  const size_t cuts[] = {0, 1, 700, 2000, 2001, 6000, full.triangle_count()};
+  OrderedMesh growing;
+  for (size_t i = 0; i + 1 < std::size(cuts); ++i) {
+    // the first cuts[i + 1] triangles, with every vertex of the full mesh
+    growing = full;
+    growing.triangles.resize(3 * cuts[i + 1]);
+    growing.surface.resize(cuts[i + 1]);
+    const size_t count = cuts[i + 1] - cuts[i];
+    ChunkCopy copy;
+    ASSERT_TRUE(copier.Copy(growing, cuts[i], count, &copy).ok());
+    EXPECT_EQ(copy.triangle_count(), count);
+    std::string two_step, raw_two_step;
+    ASSERT_TRUE(EncodeChunk(copy, {}, &two_step).ok());
+    ASSERT_TRUE(EncodeChunkRaw(copy, &raw_two_step).ok());
+    EXPECT_EQ(two_step, Encode(full, cuts[i], count)) << i;
+    EXPECT_EQ(raw_two_step, EncodeRaw(full, cuts[i], count)) << i;
+  }
+  ChunkCopy copy;
+  ASSERT_TRUE(copier.Copy(other, 10, 2500, &copy).ok());
+  std::string two_step;
+  ASSERT_TRUE(EncodeChunk(copy, {}, &two_step).ok());
+  EXPECT_EQ(two_step, Encode(other, 10, 2500));
+  // Errors leave the copy as it was; an empty copy is not encodable.
+  EXPECT_EQ(copier.Copy(other, 10, other.triangle_count(), &copy).code(),
+            absl::StatusCode::kOutOfRange);
+  EXPECT_EQ(copy.triangle_count(), 2500u);
+  ChunkCopy empty;
+  EXPECT_EQ(EncodeChunk(empty, {}, &two_step).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(EncodeChunkRaw(empty, &two_step).code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST(MeshCodec, VerticesAreNumberedInFirstUseOrder) {
@@ -411,11 +502,14 @@ class MalformedChunks : public ::testing::Test {
  protected:
   void SetUp() override {
     mesh_ = Shuffled(MakeSphere(2000), 11);
+    // edge cache, raw, Draco mesh with compressed and with plain indices
     chunks_ = {Encode(mesh_, 0, mesh_.triangle_count()),
                EncodeRaw(mesh_, 0, mesh_.triangle_count())};
-    CodecOptions uncompressed;
-    uncompressed.compress_connectivity = false;
-    chunks_.push_back(Encode(mesh_, 0, mesh_.triangle_count(), uncompressed));
+    for (const CodecOptions& options : DracoVariants()) {
+      if (options.connectivity == CodecOptions::Connectivity::kDracoSequential) {
+        chunks_.push_back(Encode(mesh_, 0, mesh_.triangle_count(), options));
+      }
+    }
     destination_ = MakeGrid(2);
   }
 
@@ -532,7 +626,7 @@ TEST_F(MalformedChunks, RandomGarbageIsRejected) {
     for (char& c : garbage) c = static_cast<char>(rng());
     if (trial % 2 == 0 && garbage.size() >= kChunkHeaderSize) {
       // Valid magic, version and codec, random everything else.
-      std::memcpy(garbage.data(), chunks_[trial % 4 == 0 ? 0 : 1].data(), 6);
+      std::memcpy(garbage.data(), chunks_[(trial / 2) % chunks_.size()].data(), 6);
     }
     EXPECT_FALSE(TryDecode(garbage).ok());
   }
@@ -557,7 +651,7 @@ TEST_F(MalformedChunks, DracoPayloadThatLosesOrderIsRejected) {
   encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
   draco::EncoderBuffer buffer;
   ASSERT_TRUE(encoder.EncodeMeshToBuffer(mesh, &buffer).ok());
-  std::string chunk = chunks_[0].substr(0, kChunkHeaderSize);
+  std::string chunk = chunks_[2].substr(0, kChunkHeaderSize);  // a Draco mesh chunk's header
   chunk.append(buffer.data(), buffer.size());
   const uint32_t payload = static_cast<uint32_t>(buffer.size());
   const uint32_t vertices = static_cast<uint32_t>(mesh_.vertex_count());
@@ -569,6 +663,43 @@ TEST_F(MalformedChunks, DracoPayloadThatLosesOrderIsRejected) {
   const absl::Status status = TryDecode(chunk);
   EXPECT_EQ(status.code(), absl::StatusCode::kDataLoss) << status;
   EXPECT_NE(status.message().find("order"), absl::string_view::npos) << status;
+}
+
+TEST_F(MalformedChunks, EdgeCachePointCloudSizeFieldIsChecked) {
+  const std::string& chunk = chunks_[0];
+  ASSERT_EQ(ReadChunkHeader(chunk.data(), chunk.size())->codec, ChunkCodec::kDracoEdgeCache);
+  uint32_t points_size;
+  std::memcpy(&points_size, chunk.data() + kChunkHeaderSize, 4);
+  const uint32_t payload_size = static_cast<uint32_t>(chunk.size() - kChunkHeaderSize);
+  for (uint32_t edited_size : {0u, 1u, 11u, 15u, points_size - 1, points_size + 1, payload_size - 4,
+                               payload_size - 3, 0xffffffffu}) {
+    std::string edited = chunk;
+    std::memcpy(edited.data() + kChunkHeaderSize, &edited_size, 4);
+    Reseal(&edited);
+    EXPECT_EQ(TryDecode(edited).code(), absl::StatusCode::kDataLoss) << edited_size;
+  }
+}
+
+TEST_F(MalformedChunks, EdgeCacheConnectivityFromAnotherChunkIsRejected) {
+  // Chunk A's point cloud with chunk B's connectivity, B using more vertices, then fewer.
+  const OrderedMesh small = Shuffled(MakeSphere(1000), 12);
+  const std::string chunks[2] = {Encode(small, 0, small.triangle_count()), chunks_[0]};
+  for (int a = 0; a < 2; ++a) {
+    const std::string& points_from = chunks[a];
+    const std::string& connectivity_from = chunks[1 - a];
+    uint32_t points_size, other_points_size;
+    std::memcpy(&points_size, points_from.data() + kChunkHeaderSize, 4);
+    std::memcpy(&other_points_size, connectivity_from.data() + kChunkHeaderSize, 4);
+    std::string edited = points_from.substr(0, kChunkHeaderSize + 4 + points_size);
+    edited.append(connectivity_from.substr(kChunkHeaderSize + 4 + other_points_size));
+    const uint32_t payload = static_cast<uint32_t>(edited.size() - kChunkHeaderSize);
+    std::memcpy(edited.data() + 16, &payload, 4);
+    for (const std::string* counts_from : {&points_from, &connectivity_from}) {
+      std::memcpy(edited.data() + 8, counts_from->data() + 8, 8);  // triangles and vertices
+      Reseal(&edited);
+      EXPECT_EQ(TryDecode(edited).code(), absl::StatusCode::kDataLoss) << a;
+    }
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -614,25 +745,30 @@ TEST(MeshCodecReport, BytesPerTriangleOnSphere) {
   for (const auto& [name, mesh] : {std::pair{"band order", &banded}, {"depth order", &depth}}) {
     const size_t count = mesh->triangle_count();
     CodecOptions sequential;
+    sequential.connectivity = CodecOptions::Connectivity::kDracoSequential;
     sequential.compress_connectivity = false;
-    const CodecOptions compressed;
+    CodecOptions compressed;
+    compressed.connectivity = CodecOptions::Connectivity::kDracoSequential;
+    const CodecOptions edge_cache;
     const Measured raw =
         Measure(*mesh, [&](std::string* out) { return EncodeChunkRaw(*mesh, 0, count, out); });
     const Measured plain = Measure(
         *mesh, [&](std::string* out) { return EncodeChunk(*mesh, 0, count, sequential, out); });
     const Measured packed = Measure(
         *mesh, [&](std::string* out) { return EncodeChunk(*mesh, 0, count, compressed, out); });
-    std::printf(
-        "sphere %zu triangles, %zu vertices, %s, 14-bit positions, 10-bit normals:\n"
-        "  %-32s %6.2f B/tri  encode %6.1f ms/M  decode %6.1f ms/M\n"
-        "  %-32s %6.2f B/tri  encode %6.1f ms/M  decode %6.1f ms/M\n"
-        "  %-32s %6.2f B/tri  encode %6.1f ms/M  decode %6.1f ms/M\n",
-        count, mesh->vertex_count(), name, "raw", raw.bytes_per_triangle, raw.encode_ms_per_million,
-        raw.decode_ms_per_million, "draco sequential", plain.bytes_per_triangle,
-        plain.encode_ms_per_million, plain.decode_ms_per_million,
-        "draco sequential + compressed conn.", packed.bytes_per_triangle,
-        packed.encode_ms_per_million, packed.decode_ms_per_million);
-    // The reason compress_connectivity defaults to true.
+    const Measured cached = Measure(
+        *mesh, [&](std::string* out) { return EncodeChunk(*mesh, 0, count, edge_cache, out); });
+    std::printf("sphere %zu triangles, %zu vertices, %s, 14-bit positions, 10-bit normals:\n",
+                count, mesh->vertex_count(), name);
+    for (const auto& [row, m] : {std::pair{"raw", &raw},
+                                 {"draco sequential", &plain},
+                                 {"draco sequential + compressed conn.", &packed},
+                                 {"draco points + edge cache (default)", &cached}}) {
+      std::printf("  %-36s %6.2f B/tri  encode %6.1f ms/M  decode %6.1f ms/M\n", row,
+                  m->bytes_per_triangle, m->encode_ms_per_million, m->decode_ms_per_million);
+    }
+    // The reasons for the default, and for compress_connectivity defaulting to true.
+    EXPECT_LT(cached.bytes_per_triangle, packed.bytes_per_triangle);
     EXPECT_LT(packed.bytes_per_triangle, plain.bytes_per_triangle);
     EXPECT_LT(plain.bytes_per_triangle, raw.bytes_per_triangle);
   }

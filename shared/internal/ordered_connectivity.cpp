@@ -1,0 +1,322 @@
+#include "shared/internal/ordered_connectivity.h"
+
+#include <absl/strings/str_cat.h>
+#include <draco/compression/config/compression_shared.h>
+#include <draco/compression/entropy/symbol_decoding.h>
+#include <draco/compression/entropy/symbol_encoding.h>
+#include <draco/core/decoder_buffer.h>
+#include <draco/core/encoder_buffer.h>
+
+#include <algorithm>
+#include <limits>
+#include <memory>
+
+namespace isostream::internal {
+namespace {
+
+static_assert((kEdgeFifoSize & (kEdgeFifoSize - 1)) == 0, "the edge FIFO is a power-of-2 ring");
+static_assert((kVertexCacheSize & (kVertexCacheSize - 1)) == 0, "the cache is a power-of-2 ring");
+
+uint64_t EdgeKey(uint32_t from, uint32_t to) { return (uint64_t{from} << 32) | to; }
+
+// The coder state both sides keep in step.
+class CoderState {
+ public:
+  // Vertices are numbered 0..vertex_count-1.
+  explicit CoderState(size_t vertex_count) : in_cache_(vertex_count, 0) {}
+
+  // Most recent first: k = 0 is the last edge pushed. Requires k < edge_count().
+  uint64_t edge(uint32_t k) const { return edges_[(pushes_ - 1 - k) & (kEdgeFifoSize - 1)]; }
+  uint32_t edge_count() const { return std::min(pushes_, kEdgeFifoSize); }
+  // Edges pushed so far; entry k is push number pushes() - 1 - k.
+  uint32_t pushes() const { return pushes_; }
+
+  // Most recent first. Requires i < cache_size().
+  uint32_t cached(uint32_t i) const { return cache_[Slot(i)]; }
+  uint32_t cache_size() const { return cache_size_; }
+
+  // Position of `vertex` in the cache, or cache_size() if absent. Most lookups are of recently
+  // used vertices, near the front.
+  uint32_t FindCached(uint32_t vertex) const {
+    if (!in_cache_[vertex]) return cache_size_;
+    uint32_t i = 0;
+    while (i < cache_size_ && cache_[Slot(i)] != vertex) ++i;
+    return i;
+  }
+
+  // What a caller knows of a corner's cache position before the triangle is recorded.
+  static constexpr uint32_t kUnknown = 0xffffffffu;  // look it up
+  static constexpr uint32_t kAbsent = 0xfffffffeu;   // not in the cache
+
+  // Records a triangle once all three corners are known. `at[r]` is corner r's cache position
+  // before this call (< cache_size()), kAbsent or kUnknown; known positions save the lookups.
+  template <typename OnPush>
+  void Add(const uint32_t x[3], uint32_t at[3], OnPush on_push) {
+    for (int r = 2; r >= 0; --r) {
+      const uint64_t key = EdgeKey(x[r], x[(r + 1) % 3]);
+      on_push(key, pushes_);
+      edges_[pushes_ & (kEdgeFifoSize - 1)] = key;
+      ++pushes_;
+    }
+    for (int r = 0; r < 3; ++r) {
+      const uint32_t from = at[r] == kUnknown  ? FindCached(x[r])
+                            : at[r] == kAbsent ? cache_size_
+                                               : at[r];
+      MoveToFront(x[r], from);
+      // Keep the later corners' positions current: entries before `from` moved back by one,
+      // the last one falling out if the cache was full and x[r] new to it.
+      for (int s = r + 1; s < 3; ++s) {
+        if (x[s] == x[r]) {
+          at[s] = 0;
+        } else if (at[s] < from) {
+          at[s] = at[s] + 1 < kVertexCacheSize ? at[s] + 1 : kAbsent;
+        }
+      }
+    }
+  }
+
+ private:
+  // The cache is a ring: position i lives in slot front_ + i.
+  uint32_t Slot(uint32_t i) const { return (front_ + i) & (kVertexCacheSize - 1); }
+
+  // Moves `vertex`, at position `from` (cache_size() if absent), to the front, dropping the
+  // least recent vertex when the cache is full.
+  void MoveToFront(uint32_t vertex, uint32_t from) {
+    if (from == cache_size_) {
+      // New to the cache: it takes the slot before the front (the least recent one if full).
+      front_ = (front_ - 1) & (kVertexCacheSize - 1);
+      if (cache_size_ == kVertexCacheSize) {
+        in_cache_[cache_[front_]] = 0;
+      } else {
+        ++cache_size_;
+      }
+      in_cache_[vertex] = 1;
+    } else {
+      for (uint32_t i = from; i > 0; --i) cache_[Slot(i)] = cache_[Slot(i - 1)];
+    }
+    cache_[front_] = vertex;
+  }
+
+  uint64_t edges_[kEdgeFifoSize] = {};
+  uint32_t pushes_ = 0;  // wraps only past 2^32 edges, far more than a chunk has
+  uint32_t cache_[kVertexCacheSize] = {};
+  uint32_t front_ = 0;
+  uint32_t cache_size_ = 0;
+  std::vector<uint8_t> in_cache_;  // per vertex: 1 while it is in cache_
+};
+
+// Encoder side: finds the newest FIFO entry holding an edge without scanning the FIFO. A
+// direct-mapped table remembers, per hashed edge, its latest push; a collision can only hide a
+// match (the triangle is then coded without it), never report a wrong one.
+class EdgeIndex {
+ public:
+  void Record(uint64_t key, uint32_t push) {
+    Slot& slot = slots_[Hash(key)];
+    slot.key = key;
+    slot.push = push;
+    slot.used = true;
+  }
+
+  // FIFO position k of `key` in `state`, or -1.
+  int64_t Find(uint64_t key, const CoderState& state) const {
+    const Slot& slot = slots_[Hash(key)];
+    if (!slot.used || slot.key != key) return -1;
+    const uint32_t k = state.pushes() - 1 - slot.push;
+    return k < kEdgeFifoSize ? int64_t{k} : -1;
+  }
+
+ private:
+  static constexpr int kBits = 10;
+  static size_t Hash(uint64_t key) {
+    return static_cast<size_t>((key * 0x9e3779b97f4a7c15ull) >> (64 - kBits));
+  }
+  struct Slot {
+    uint64_t key = 0;
+    uint32_t push = 0;
+    bool used = false;
+  };
+  Slot slots_[size_t{1} << kBits];
+};
+
+bool AppendSymbols(const std::vector<uint32_t>& symbols, std::string* out) {
+  if (symbols.empty()) return true;
+  draco::EncoderBuffer buffer;
+  // Draco's default compression level; higher levels change nothing on these small alphabets.
+  if (!draco::EncodeSymbols(symbols.data(), static_cast<int>(symbols.size()), 1, nullptr,
+                            &buffer)) {
+    return false;
+  }
+  out->append(buffer.data(), buffer.size());
+  return true;
+}
+
+bool ReadSymbols(draco::DecoderBuffer* buffer, size_t count, std::vector<uint32_t>* symbols) {
+  symbols->resize(count);
+  if (count == 0) return true;
+  return draco::DecodeSymbols(static_cast<uint32_t>(count), 1, buffer, symbols->data());
+}
+
+}  // namespace
+
+absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangle_count,
+                                       size_t vertex_count, std::string* out) {
+  if (triangle_count > std::numeric_limits<int>::max() / 3 ||
+      vertex_count > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError("too many triangles or vertices for one chunk");
+  }
+  std::vector<uint32_t> triangle_symbols(triangle_count);
+  std::vector<uint32_t> corner_symbols;
+  std::vector<uint32_t> explicit_values;
+  corner_symbols.reserve(triangle_count + vertex_count);
+  CoderState state(vertex_count);
+  auto index = std::make_unique<EdgeIndex>();
+  auto record = [&index](uint64_t key, uint32_t push) { index->Record(key, push); };
+  uint32_t next = 0;  // the number a new vertex gets
+
+  auto code_corner = [&](uint32_t vertex, uint32_t* at) -> absl::Status {
+    if (vertex == next) {
+      *at = CoderState::kAbsent;
+      if (next == vertex_count) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("vertex index ", vertex, " is not below the vertex count"));
+      }
+      ++next;
+      corner_symbols.push_back(0);
+      return absl::OkStatus();
+    }
+    if (vertex > next) {
+      return absl::InvalidArgumentError(absl::StrCat("vertex ", vertex, " is used before vertex ",
+                                                     next, ": not in first-use order"));
+    }
+    *at = state.FindCached(vertex);
+    if (*at < state.cache_size()) {
+      corner_symbols.push_back(1 + *at);
+    } else {
+      *at = CoderState::kAbsent;
+      corner_symbols.push_back(kExplicitCorner);
+      explicit_values.push_back(next - 1 - vertex);
+    }
+    return absl::OkStatus();
+  };
+
+  for (size_t t = 0; t < triangle_count; ++t) {
+    const uint32_t* x = triangles + 3 * t;
+    // The newest FIFO edge that is one of this triangle's edges reversed (smallest k, then r).
+    uint32_t symbol = kNoEdge;
+    for (uint32_t r = 0; r < 3; ++r) {
+      const int64_t k = index->Find(EdgeKey(x[(r + 1) % 3], x[r]), state);
+      if (k >= 0 && (symbol == kNoEdge || uint32_t(k) < symbol / 3)) symbol = 3 * uint32_t(k) + r;
+    }
+    triangle_symbols[t] = symbol;
+    uint32_t at[3] = {CoderState::kUnknown, CoderState::kUnknown, CoderState::kUnknown};
+    if (symbol == kNoEdge) {
+      for (int r = 0; r < 3; ++r) ISOSTREAM_RETURN_IF_ERROR(code_corner(x[r], &at[r]));
+    } else {
+      const int r = (symbol % 3 + 2) % 3;
+      ISOSTREAM_RETURN_IF_ERROR(code_corner(x[r], &at[r]));
+    }
+    state.Add(x, at, record);
+  }
+  if (next != vertex_count) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("the triangles use ", next, " of ", vertex_count, " vertices"));
+  }
+  if (!AppendSymbols(triangle_symbols, out) || !AppendSymbols(corner_symbols, out) ||
+      !AppendSymbols(explicit_values, out)) {
+    return absl::InternalError("Draco's symbol encoder failed on the connectivity");
+  }
+  return absl::OkStatus();
+}
+
+absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t triangle_count,
+                                       size_t vertex_count, std::vector<uint32_t>* triangles) {
+  if (triangle_count > std::numeric_limits<uint32_t>::max() / 3 ||
+      vertex_count > std::numeric_limits<uint32_t>::max()) {
+    return absl::DataLossError("connectivity counts out of range");
+  }
+  draco::DecoderBuffer buffer;
+  // Symbol streams are read according to the buffer's bitstream version (0, unset, selects a
+  // pre-2.0 layout); EncodeSymbols writes the current one.
+  buffer.Init(data, size, draco::kDracoMeshBitstreamVersion);
+  std::vector<uint32_t> triangle_symbols;
+  if (!ReadSymbols(&buffer, triangle_count, &triangle_symbols)) {
+    return absl::DataLossError("connectivity: triangle symbols do not decode");
+  }
+  size_t corner_count = 0;
+  for (uint32_t s : triangle_symbols) {
+    if (s > kNoEdge) return absl::DataLossError("connectivity: triangle symbol out of range");
+    corner_count += s == kNoEdge ? 3 : 1;
+  }
+  std::vector<uint32_t> corner_symbols;
+  if (!ReadSymbols(&buffer, corner_count, &corner_symbols)) {
+    return absl::DataLossError("connectivity: corner symbols do not decode");
+  }
+  size_t explicit_count = 0;
+  for (uint32_t s : corner_symbols) {
+    if (s > kExplicitCorner) return absl::DataLossError("connectivity: corner symbol out of range");
+    explicit_count += s == kExplicitCorner;
+  }
+  std::vector<uint32_t> explicit_values;
+  if (!ReadSymbols(&buffer, explicit_count, &explicit_values)) {
+    return absl::DataLossError("connectivity: explicit corners do not decode");
+  }
+  if (buffer.remaining_size() != 0) {
+    return absl::DataLossError("connectivity: bytes left over after the last symbol");
+  }
+
+  triangles->resize(3 * triangle_count);
+  CoderState state(vertex_count);
+  uint32_t next = 0;
+  size_t corner = 0, explicit_index = 0;
+  auto decode_corner = [&](uint32_t* vertex, uint32_t* at) -> bool {
+    const uint32_t s = corner_symbols[corner++];
+    if (s == 0) {
+      if (next == vertex_count) return false;
+      *vertex = next++;
+      *at = CoderState::kAbsent;
+    } else if (s == kExplicitCorner) {
+      const uint32_t back = explicit_values[explicit_index++];
+      if (back >= next) return false;
+      *vertex = next - 1 - back;
+      // Normally not in the cache (the encoder would have used its position), but a stream
+      // may code a cached vertex explicitly: the lookup in Add decides.
+      *at = CoderState::kUnknown;
+    } else {
+      if (s - 1 >= state.cache_size()) return false;
+      *vertex = state.cached(s - 1);
+      *at = s - 1;
+    }
+    return true;
+  };
+  for (size_t t = 0; t < triangle_count; ++t) {
+    uint32_t* x = triangles->data() + 3 * t;
+    const uint32_t s = triangle_symbols[t];
+    bool ok = true;
+    uint32_t at[3] = {CoderState::kUnknown, CoderState::kUnknown, CoderState::kUnknown};
+    if (s == kNoEdge) {
+      for (int r = 0; r < 3 && ok; ++r) ok = decode_corner(&x[r], &at[r]);
+    } else {
+      const uint32_t k = s / 3, r = s % 3;
+      if (k >= state.edge_count()) {
+        ok = false;
+      } else {
+        const uint64_t e = state.edge(k);
+        x[r] = static_cast<uint32_t>(e);
+        x[(r + 1) % 3] = static_cast<uint32_t>(e >> 32);
+        ok = decode_corner(&x[(r + 2) % 3], &at[(r + 2) % 3]);
+      }
+    }
+    if (!ok) {
+      return absl::DataLossError(
+          absl::StrCat("connectivity: triangle ", t, " refers to a vertex it cannot have"));
+    }
+    state.Add(x, at, [](uint64_t, uint32_t) {});
+  }
+  if (next != vertex_count) {
+    return absl::DataLossError(
+        absl::StrCat("connectivity: the triangles use ", next, " of ", vertex_count, " vertices"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace isostream::internal
