@@ -12,7 +12,7 @@ PACKAGES=(
   # headless GL through EGL on Mesa (llvmpipe needs no GPU and no X server)
   libegl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri libgl-dev
   # the viewer's --window mode (GLFW), and a virtual X server to test it headless
-  libglfw3-dev xvfb xauth
+  libglfw3-dev xvfb xauth xdotool
   # transport
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   # small well-kept libraries: CLI parsing, logging, JSON, PNG

@@ -61,6 +61,61 @@ struct Inbox {
   std::atomic<bool> ended{false};
 };
 
+// One Session stream and the thread that reads it. The daemon closes a session that sent no
+// view for a while (DEADLINE_EXCEEDED); the window then keeps its picture and opens a new
+// session when the user next moves.
+class Connection {
+ public:
+  explicit Connection(net::Client* client) : client_(client) {}
+  ~Connection() { Close(); }
+
+  bool open() const { return session_ != nullptr; }
+  Inbox& inbox() { return *inbox_; }
+
+  absl::Status Open() {
+    auto session = client_->OpenSession();
+    if (!session.ok()) return session.status();
+    session_ = std::move(*session);
+    inbox_ = std::make_unique<Inbox>();
+    receiver_ = std::thread([session = session_.get(), inbox = inbox_.get()] {
+      ::isostream::v1::FrameChunk chunk;
+      while (session->Read(&chunk)) {
+        std::lock_guard<std::mutex> lock(inbox->mu);
+        inbox->chunks.push_back(std::move(chunk));
+      }
+      inbox->ended = true;
+    });
+    return absl::OkStatus();
+  }
+
+  absl::Status Send(const ::isostream::v1::ViewRequest& request) {
+    return session_->Send(request);
+  }
+
+  // The stream ended from the server's side: its final status.
+  absl::Status Finished() {
+    receiver_.join();
+    absl::Status status = session_->Finish();
+    session_.reset();
+    return status;
+  }
+
+  void Close() {
+    if (!session_) return;
+    // The receiver may be blocked in Read: cancel, let it return, then finish the call here.
+    session_->TryCancel();
+    receiver_.join();
+    session_->Finish().IgnoreError();
+    session_.reset();
+  }
+
+ private:
+  net::Client* client_;
+  std::unique_ptr<net::Session> session_;
+  std::unique_ptr<Inbox> inbox_ = std::make_unique<Inbox>();
+  std::thread receiver_;
+};
+
 absl::Status Screenshot(int width, int height, const std::string& path) {
   render::Image image;
   image.width = width;
@@ -156,17 +211,8 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
     in->changed = true;
   });
 
-  auto session = client.OpenSession();
-  if (!session.ok()) return session.status();
-  Inbox inbox;
-  std::thread receiver([&] {
-    ::isostream::v1::FrameChunk chunk;
-    while ((*session)->Read(&chunk)) {
-      std::lock_guard<std::mutex> lock(inbox.mu);
-      inbox.chunks.push_back(std::move(chunk));
-    }
-    inbox.ended = true;
-  });
+  Connection connection(&client);
+  if (absl::Status opened = connection.Open(); !opened.ok()) return opened;
 
   ViewState state = options.state;
   uint64_t request_id = 0;
@@ -190,10 +236,12 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       input.iso_steps = 0;
       camera.eye = input.orbit.Eye();
       camera.target = input.orbit.target;
-      result = (*session)->Send(MakeViewRequest(state, camera, palette, ++request_id));
+      if (!connection.open()) result = connection.Open();
+      if (result.ok()) result = connection.Send(MakeViewRequest(state, camera, palette, ++request_id));
       if (!result.ok()) break;
       input.changed = false;
     }
+    Inbox& inbox = connection.inbox();
     {
       std::lock_guard<std::mutex> lock(inbox.mu);
       while (!inbox.chunks.empty() && result.ok()) {
@@ -223,10 +271,14 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       }
     }
     if (!result.ok()) break;
-    if (inbox.ended && inbox.chunks.empty()) {
-      result = (*session)->Finish();
-      if (result.ok()) result = absl::UnavailableError("the server closed the session");
-      break;
+    if (connection.open() && inbox.ended && inbox.chunks.empty()) {
+      result = connection.Finished();
+      if (absl::IsDeadlineExceeded(result)) {
+        result = absl::OkStatus();  // idle: reopen on the next move
+      } else {
+        if (result.ok()) result = absl::UnavailableError("the server closed the session");
+        break;
+      }
     }
     int fb_width, fb_height;
     glfwGetFramebufferSize(window, &fb_width, &fb_height);
@@ -241,10 +293,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
     }
     glfwSwapBuffers(window);
   }
-  // The receiver may be blocked in Read: cancel, let it return, then finish the call here.
-  (*session)->TryCancel();
-  receiver.join();
-  if (!inbox.ended || result.ok()) (*session)->Finish().IgnoreError();
+  connection.Close();
   renderer->reset();
   glfwDestroyWindow(window);
   return result;

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <fstream>
+#include <iterator>
 #include <string>
 
 #include "client/net/session_client.h"
@@ -101,6 +103,32 @@ TEST(View, WindowModeShowsTheFrameUnderXvfb) {
   ASSERT_TRUE(image.ok()) << image.status();
   EXPECT_EQ(image->width, 240);
   EXPECT_GT(Coverage(*image), 0.05);
+}
+
+// The daemon closes a session that sent no view for --idle-timeout-s; the window keeps its
+// picture and opens a new session at the next key press (xdotool presses R after the close).
+TEST(View, WindowReopensASessionTheDaemonClosedAsIdle) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1 && command -v xdotool > /dev/null 2>&1") !=
+      0)
+    GTEST_SKIP() << "xvfb-run or xdotool is not installed (scripts/install-deps.sh installs them)";
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache", "--idle-timeout-s", "1"}, dir.path() + "/daemon.log"));
+  const std::string png = dir.path() + "/window.png";
+  const std::string view = std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
+                           " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01"
+                           " --eye 2.2,1.6,2.8 --size 240x200 --window --exit-after 2 -o " + png;
+  const std::string cmd = "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' sh -c '" + view +
+                          " & pid=$!; sleep 3; xdotool search --sync --name isostream-view"
+                          " windowfocus --sync key r; wait $pid'";
+  const testing::CommandResult run = testing::RunCommand(cmd);
+  ASSERT_EQ(run.code, 0) << run.output;
+  auto image = render::ReadPng(png);
+  ASSERT_TRUE(image.ok()) << image.status();
+  EXPECT_GT(Coverage(*image), 0.05);
+  std::ifstream log(dir.path() + "/daemon.log");
+  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("idle"), std::string::npos) << "the session was never closed as idle";
 }
 
 TEST(View, CorruptChunkBytesAreAnErrorNotACrash) {
