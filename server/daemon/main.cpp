@@ -16,6 +16,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "shared/malloc_tuning.h"
 #include "server/service/config.h"
 #include "server/service/service.h"
 
@@ -102,6 +103,7 @@ int Run(const DaemonConfig& config) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  isostream::KeepFreedMemoryForReuse();  // frames reuse freed memory instead of new pages
   // Block the stop signals in every thread (all threads are created after this), so that one
   // sigwait sees them and no gRPC or TBB thread is interrupted.
   sigset_t signals;

@@ -11,6 +11,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "shared/malloc_tuning.h"
 #include "server/extract/extractor.h"
 #include "server/hierarchy/hierarchy.h"
 #include "server/volume/load.h"
@@ -148,4 +149,11 @@ BENCHMARK(BM_ExtractThenSort)
 }  // namespace
 }  // namespace isostream
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  isostream::KeepFreedMemoryForReuse();  // as isostreamd does: frames reuse freed memory
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

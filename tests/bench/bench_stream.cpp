@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "shared/malloc_tuning.h"
 #include "client/net/session_client.h"
 #include "server/extract/extractor.h"
 #include "server/hierarchy/prepared_volume.h"
@@ -225,6 +226,7 @@ bool RunView(net::Session* s, const pb::ViewRequest& view, bool decode, ViewTimi
 }  // namespace
 
 int main(int argc, char** argv) {
+  KeepFreedMemoryForReuse();  // as isostreamd does
   const std::string spec = argc > 1 ? argv[1] : "cayley:257";
   const int64_t target = argc > 2 ? std::atoll(argv[2]) : 1'000'000;
   const int views = argc > 3 ? std::atoi(argv[3]) : 7;

@@ -1,0 +1,21 @@
+// Process-wide allocator setting for programs that extract frame after frame.
+//
+// A 1 M-triangle frame's mesh is ~25 MB in a few large vectors. By default glibc serves such
+// blocks with mmap and returns them with munmap, so every frame faults in fresh zeroed pages
+// (~6 k faults, 20-30 ms on a VM) while it appends its parts. Serving blocks up to 32 MB from
+// the heap and never trimming it keeps freed frame memory for the next frame: the ordered
+// join of a 1 M-triangle frame went from 34-42 ms to 13-21 ms (BENCHMARKS.md). The cost is
+// that the process keeps its peak heap; long-lived blocks above 32 MB (hierarchy bricks) still
+// come from mmap and go back when freed.
+#pragma once
+
+#include <malloc.h>
+
+namespace isostream {
+
+inline void KeepFreedMemoryForReuse() {
+  mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's largest allowed value on 64-bit
+  mallopt(M_TRIM_THRESHOLD, 1 << 30);
+}
+
+}  // namespace isostream
