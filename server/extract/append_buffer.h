@@ -27,10 +27,6 @@ class AppendBuffer {
   T& operator[](size_t i) { return data_[i]; }
   const T& operator[](size_t i) const { return data_[i]; }
   void clear() { size_ = 0; }
-  void release() {
-    data_.reset();
-    size_ = capacity_ = 0;
-  }
 
  private:
   void Grow(size_t needed) {

@@ -11,6 +11,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -90,11 +91,17 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.inv_spacing = glm::vec3(1.0 / xf.spacing);
   c.tables = &ReferenceTets::Get();
   c.cases = &MarchingTets::Get();
-  for (int i = 0; i < kNumTetClasses; ++i) {
-    const auto& v = (*c.tables)[TetClass{uint8_t(i)}].vertex;
-    const glm::dmat3 e(glm::dvec3(v[1] - v[0]), glm::dvec3(v[2] - v[0]), glm::dvec3(v[3] - v[0]));
-    c.negative[i] = glm::determinant(e) < 0;
-  }
+  static const std::array<uint8_t, kNumTetClasses> negative = [&] {
+    std::array<uint8_t, kNumTetClasses> out{};
+    for (int i = 0; i < kNumTetClasses; ++i) {
+      const auto& v = (*c.tables)[TetClass{uint8_t(i)}].vertex;
+      const glm::dmat3 e(glm::dvec3(v[1] - v[0]), glm::dvec3(v[2] - v[0]),
+                         glm::dvec3(v[3] - v[0]));
+      out[i] = glm::determinant(e) < 0;
+    }
+    return out;
+  }();  // a property of the reference classes: computed once, not per request
+  std::copy(negative.begin(), negative.end(), c.negative);
   for (int level = 0; level <= 3 * c.k; ++level)
     c.inv_unit[level] = 2.0 / double((1 << c.k) >> (level / 3));
   return c;

@@ -29,7 +29,6 @@ struct SubtreeMesh {
   int64_t leaves = 0;
 
   size_t vertex_count() const { return vertices; }
-  size_t triangle_count() const { return surface.size(); }
   size_t capacity_bytes() const {
     return (positions.capacity() + normals.capacity()) * sizeof(float) +
            triangles.capacity() * sizeof(uint32_t) + surface.capacity() +
