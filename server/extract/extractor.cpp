@@ -64,8 +64,11 @@ double Ms(std::chrono::steady_clock::time_point since) {
 Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequest& r,
                     double eps) {
   Context c;
-  c.bricks = h.bricks();
-  for (int a = 0; a < 3; ++a) c.axis_offset[a] = h.axis_offsets()[a].data();
+  c.store = reinterpret_cast<const char*>(h.bricks());
+  for (int a = 0; a < 3; ++a) {
+    c.value_bytes[a] = h.value_byte_offsets()[a].data();
+    c.eta_bytes[a] = h.eta_byte_offsets()[a].data();
+  }
   c.k = h.k();
   c.n = h.n();
   for (int a = 0; a < 3; ++a) c.data_max[a] = h.data_dims()[a] - 1;
@@ -88,6 +91,8 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.dir = r.view.direction / xf.spacing;
   c.normals = r.normals;
   c.xf = xf;
+  c.world_origin = glm::vec3(xf.origin);
+  c.world_spacing = glm::vec3(xf.spacing);
   c.inv_spacing = glm::vec3(1.0 / xf.spacing);
   c.tables = &ReferenceTets::Get();
   c.cases = &MarchingTets::Get();
@@ -131,7 +136,9 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
     t.g = glm::inverse(glm::transpose(e)) * df;  // the only direct solve: the six roots
     t.cls = tables.initial_class(i);
     t.level = 0;
-    t.xref = c.Index(RefinementPoint(v));
+    const extract_internal::PackedPoint x = extract_internal::Pack(RefinementPoint(v));
+    t.xref_value = c.ValueOffset(x);
+    t.xref_eta = c.EtaOffset(x);
     items.push_back(t);
   }
   constexpr size_t kTargetSubtrees = 256;

@@ -46,15 +46,18 @@ struct Node {
   PackedPoint v[4];  // canonical vertex order of the class
   float f[4];
   glm::dvec3 g;  // gradient of the linear interpolant on T, grid units
-  size_t xref;   // store index of the refinement vertex (unused at the finest level)
+  // Byte offsets in the store of the refinement vertex's sample and eta (unused at the finest
+  // level).
+  uint64_t xref_value, xref_eta;
   TetClass cls;
   int level;
 };
 
 // Everything the traversal reads, fixed for one request.
 struct Context {
-  const HierarchyBrick* bricks = nullptr;
-  const uint32_t* axis_offset[3] = {nullptr, nullptr, nullptr};  // Hierarchy::axis_offsets()
+  const char* store = nullptr;                              // Hierarchy::bricks()
+  const uint64_t* value_bytes[3] = {nullptr, nullptr, nullptr};  // Hierarchy::value_byte_offsets()
+  const uint64_t* eta_bytes[3] = {nullptr, nullptr, nullptr};    // Hierarchy::eta_byte_offsets()
   int k = 0, n = 0;
   glm::ivec3 data_max{0};             // data box is [0, data_max]
   bool clip = false;                  // the data box is smaller than the cube
@@ -67,6 +70,7 @@ struct Context {
   glm::dvec3 eye{0.0}, dir{0.0};  // grid space
   NormalMode normals = NormalMode::kSmooth;
   GridToWorld xf;
+  glm::vec3 world_origin{0.0f}, world_spacing{1.0f};  // xf in single precision
   glm::vec3 inv_spacing{1.0f};  // grid-space gradient -> world-space gradient
   const ReferenceTets* tables = nullptr;
   const MarchingTets* cases = nullptr;
@@ -74,20 +78,22 @@ struct Context {
   // 1 / (real length of one normalised class unit) per level: half the level's cube cell.
   double inv_unit[3 * 16 + 1];
 
-  size_t Index(const glm::ivec3& p) const {  // Hierarchy::index
-    return size_t(axis_offset[0][p.x]) + axis_offset[1][p.y] + axis_offset[2][p.z];
+  static uint64_t Sum(const uint64_t* const table[3], PackedPoint p) {
+    return table[0][p & kFieldMask] + table[1][(p >> kFieldBits) & kFieldMask] +
+           table[2][p >> (2 * kFieldBits)];
   }
-  size_t Index(PackedPoint p) const {
-    return size_t(axis_offset[0][p & kFieldMask]) +
-           axis_offset[1][(p >> kFieldBits) & kFieldMask] + axis_offset[2][p >> (2 * kFieldBits)];
+  uint64_t ValueOffset(PackedPoint p) const { return Sum(value_bytes, p); }
+  uint64_t EtaOffset(PackedPoint p) const { return Sum(eta_bytes, p); }
+  uint64_t ValueOffset(const glm::ivec3& p) const {
+    return value_bytes[0][p.x] + value_bytes[1][p.y] + value_bytes[2][p.z];
   }
-  float F(size_t i) const { return bricks[i >> 9].value[i & 511]; }
-  float Eta(size_t i) const { return DecodeEta(bricks[i >> 9].eta[i & 511]); }
-  float F(const glm::ivec3& p) const { return F(Index(p)); }
-  void Prefetch(size_t i) const {
-    __builtin_prefetch(&bricks[i >> 9].value[i & 511]);
-    __builtin_prefetch(&bricks[i >> 9].eta[i & 511]);
+  float F(uint64_t value_offset) const {
+    return *reinterpret_cast<const float*>(store + value_offset);
   }
+  float Eta(uint64_t eta_offset) const {
+    return DecodeEta(*reinterpret_cast<const uint16_t*>(store + eta_offset));
+  }
+  float F(const glm::ivec3& p) const { return F(ValueOffset(p)); }
 };
 
 enum class Decision { kCull, kLeaf, kRefine };
@@ -117,7 +123,7 @@ inline Decision Decide(const Context& c, const Node& t, int* first, int* last) {
     IsoRange(c, fmin, fmax, first, last);  // exact: a crossing needs fmin < iso <= fmax
     return *first < *last ? Decision::kLeaf : Decision::kCull;
   }
-  const float e = c.Eta(t.xref);
+  const float e = c.Eta(t.xref_eta);
   // Any iso in [fmin - e, fmax + e] may meet f_full inside T.
   int a = 0;
   while (a < c.iso_count && c.iso[a] < fmin - e) ++a;
@@ -136,7 +142,7 @@ inline Decision Decide(const Context& c, const Node& t) {
 inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
   const PackedPoint x = (t.v[0] + t.v[3]) >> 1;
-  const float fx = c.F(t.xref);
+  const float fx = c.F(t.xref_value);
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
   const PackedPoint points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
   const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
@@ -159,8 +165,11 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
     // The child's first read is its refinement vertex: start fetching it now (the second
     // child has a whole subtree's time to arrive).
     if (o.level < 3 * c.k) {
-      o.xref = c.Index((o.v[0] + o.v[3]) >> 1);
-      c.Prefetch(o.xref);
+      const PackedPoint ox = (o.v[0] + o.v[3]) >> 1;
+      o.xref_value = c.ValueOffset(ox);
+      o.xref_eta = c.EtaOffset(ox);
+      __builtin_prefetch(c.store + o.xref_value);
+      __builtin_prefetch(c.store + o.xref_eta);
     }
   }
 }
@@ -346,19 +355,21 @@ class Traverser {
       std::swap(fa, fb);
       d = -d;
     }
-    const double tt = (double(c_.iso[s]) - fa) / (double(fb) - fa);
-    const glm::dvec3 pg = glm::dvec3(a) + tt * glm::dvec3(d);
-    const glm::dvec3 pw = c_.xf.origin + c_.xf.spacing * pg;
+    // Single precision: a grid coordinate below 2^13 keeps ~1e-3 voxel even in the last bit,
+    // far below the codec's quantization step.
+    const float tt = (c_.iso[s] - fa) / (fb - fa);
+    const glm::vec3 pg = glm::vec3(a) + tt * glm::vec3(d);
+    const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
     glm::vec3 grad = glm::vec3(t.g);
     if (share) {
-      const glm::vec3 g = glm::mix(GridGradient(a), GridGradient(b), float(tt));
+      const glm::vec3 g = glm::mix(GridGradient(a), GridGradient(b), tt);
       if (glm::dot(g, g) != 0) grad = g;
     }
     grad *= c_.inv_spacing;
     const float len2 = glm::dot(grad, grad);
     const glm::vec3 nrm = len2 > 0 ? grad * (-1.0f / std::sqrt(len2)) : glm::vec3(0.0f);
     float* p = out_->positions.Extend(3);
-    p[0] = float(pw.x), p[1] = float(pw.y), p[2] = float(pw.z);
+    p[0] = pw.x, p[1] = pw.y, p[2] = pw.z;
     float* q = out_->normals.Extend(3);
     q[0] = nrm.x, q[1] = nrm.y, q[2] = nrm.z;
     ++out_->vertices;
@@ -368,11 +379,18 @@ class Traverser {
 
   // Central differences of the samples at a grid point, one-sided on the cube's faces.
   glm::vec3 GridGradient(const glm::ivec3& p) const {
-    const uint32_t *ox = c_.axis_offset[0], *oy = c_.axis_offset[1], *oz = c_.axis_offset[2];
+    const uint64_t *ox = c_.value_bytes[0], *oy = c_.value_bytes[1], *oz = c_.value_bytes[2];
     const int last = c_.n - 1;
+    if (unsigned(p.x - 1) < unsigned(last - 1) && unsigned(p.y - 1) < unsigned(last - 1) &&
+        unsigned(p.z - 1) < unsigned(last - 1)) {  // inside the cube: both neighbours exist
+      const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
+      return 0.5f * glm::vec3(c_.F(ox[p.x + 1] + y + z) - c_.F(ox[p.x - 1] + y + z),
+                              c_.F(x + oy[p.y + 1] + z) - c_.F(x + oy[p.y - 1] + z),
+                              c_.F(x + y + oz[p.z + 1]) - c_.F(x + y + oz[p.z - 1]));
+    }
     const glm::ivec3 lo(std::max(p.x - 1, 0), std::max(p.y - 1, 0), std::max(p.z - 1, 0));
     const glm::ivec3 hi(std::min(p.x + 1, last), std::min(p.y + 1, last), std::min(p.z + 1, last));
-    const size_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
+    const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
     static constexpr float kInvSpan[3] = {0.0f, 1.0f, 0.5f};  // by hi - lo
     return {(c_.F(ox[hi.x] + y + z) - c_.F(ox[lo.x] + y + z)) * kInvSpan[hi.x - lo.x],
             (c_.F(x + oy[hi.y] + z) - c_.F(x + oy[lo.y] + z)) * kInvSpan[hi.y - lo.y],

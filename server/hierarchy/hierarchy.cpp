@@ -48,6 +48,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 
 #include "server/hierarchy/refinement_vertex.h"
@@ -412,8 +413,15 @@ absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
   for (int a = 0; a < 3; ++a) {
     const size_t brick_stride = a == 0 ? 1 : a == 1 ? nb : nb * nb;
     axis_offset_[a].resize(n);
-    for (size_t c = 0; c < n; ++c)
-      axis_offset_[a][c] = uint32_t((((c >> b) * brick_stride) << (3 * b)) | ((c & m) << (a * b)));
+    value_bytes_[a].resize(n);
+    eta_bytes_[a].resize(n);
+    for (size_t c = 0; c < n; ++c) {
+      const size_t brick = (c >> b) * brick_stride, inside = (c & m) << (a * b);
+      axis_offset_[a][c] = uint32_t((brick << (3 * b)) | inside);
+      value_bytes_[a][c] = brick * sizeof(HierarchyBrick) + inside * sizeof(float);
+      eta_bytes_[a][c] = brick * sizeof(HierarchyBrick) + inside * sizeof(uint16_t) +
+                         (a == 0 ? offsetof(HierarchyBrick, eta) : 0);
+    }
   }
   bricks_.resize(nb * nb * nb);  // not initialised: the builder or the assembly writes all
   AdviseHugePages(bricks_.data(), bricks_.size() * sizeof(HierarchyBrick));

@@ -77,6 +77,12 @@ class Hierarchy {
   }
   // axis_offsets()[a][c]: the index contribution of coordinate c on axis a.
   const std::array<std::vector<uint32_t>, 3>& axis_offsets() const { return axis_offset_; }
+  // The same separation in bytes from bricks(): the sum over the axes of value_byte_offsets()
+  // is the byte offset of the point's sample, of eta_byte_offsets() that of its eta. The
+  // extractor's hot loops address the store with these (a sum and a load, where the index
+  // needs a shift, a multiply and a mask first).
+  const std::array<std::vector<uint64_t>, 3>& value_byte_offsets() const { return value_bytes_; }
+  const std::array<std::vector<uint64_t>, 3>& eta_byte_offsets() const { return eta_bytes_; }
   const HierarchyBrick* bricks() const { return bricks_.data(); }
   float sample_at(size_t i) const { return bricks_[i >> 9].value[i & 511]; }
   float eta_at(size_t i) const { return DecodeEta(bricks_[i >> 9].eta[i & 511]); }
@@ -110,6 +116,7 @@ class Hierarchy {
   std::array<int, 3> data_dims_{0, 0, 0};
   UninitializedVector<HierarchyBrick> bricks_;
   std::array<std::vector<uint32_t>, 3> axis_offset_;
+  std::array<std::vector<uint64_t>, 3> value_bytes_, eta_bytes_;
 };
 
 using HierarchyPtr = std::shared_ptr<const Hierarchy>;

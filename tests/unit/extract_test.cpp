@@ -197,8 +197,8 @@ TriKey MakeKey(int surface, std::array<glm::vec3, 3> p) {
 
 // Brute-force marching tetrahedra over the reflected Kuhn triangulation, built directly from
 // the grid (each unit cube split around the diagonal through its all-even corner), with the
-// same conventions: a vertex is inside when f >= iso, crossings interpolated from the
-// lexicographically smaller endpoint, quads split along the shorter diagonal (ties by position).
+// same conventions: a vertex is inside when f >= iso, crossings interpolated (in single
+// precision) from the lexicographically smaller endpoint, quads split along the shorter diagonal (ties by position).
 std::multiset<TriKey> BruteForce(const Hierarchy& h, const std::vector<float>& iso) {
   std::multiset<TriKey> tris;
   const int n = h.n();
@@ -224,8 +224,8 @@ std::multiset<TriKey> BruteForce(const Hierarchy& h, const std::vector<float>& i
               float fa = f[i], fb = f[j];
               if (std::tie(b.x, b.y, b.z) < std::tie(a.x, a.y, a.z))
                 std::swap(a, b), std::swap(fa, fb);
-              const double t = (double(iso[s]) - fa) / (double(fb) - fa);
-              return glm::vec3(glm::dvec3(a) + t * glm::dvec3(b - a));
+              const float t = (iso[s] - fa) / (fb - fa);
+              return glm::vec3(a) + t * glm::vec3(b - a);
             };
             std::vector<int> in, out;
             for (int i = 0; i < 4; ++i) (f[i] >= iso[s] ? in : out).push_back(i);
