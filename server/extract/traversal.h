@@ -280,7 +280,8 @@ class Traverser {
     const int count = mc.edge_count - 2;
     if (!kEmit) return count;
     uint32_t v[4];
-    for (int i = 0; i < mc.edge_count; ++i) v[i] = EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
+    const int edges = mc.edge_count;  // a local: the stores below could alias the table
+    for (int i = 0; i < edges; ++i) v[i] = EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
     if (count == 2 && QuadSplitsAlong13(v)) {
       // Rotate the cycle so the fan's diagonal (v0, v2) is the chosen one.
       const uint32_t v0 = v[0];
@@ -398,7 +399,9 @@ class Traverser {
   }
 
   // A leaf that straddles the data box: keep the part of the triangle inside it.
-  void ClipTriangle(uint32_t a, uint32_t b, uint32_t d, uint8_t surface) {
+  // Out of line: rare, and its polygon buffers would otherwise enlarge every leaf's frame.
+  __attribute__((noinline)) void ClipTriangle(uint32_t a, uint32_t b, uint32_t d,
+                                              uint8_t surface) {
     struct V {
       glm::dvec3 p, n;
     };
