@@ -206,6 +206,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
       st->set_vertices(stats->vertices);
       st->set_eps_used(stats->eps_used);
       st->set_extract_ms(stats->total_ms);
+      st->set_budget_passes(stats->budget_passes);
       st->set_chunk_count(int32_t(index + 1));
     }
     cut_end += count;

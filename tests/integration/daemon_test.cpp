@@ -181,6 +181,36 @@ TEST_F(Daemon, DecodedFrameEqualsDirectExtraction) {
   }
 }
 
+// The budget -> eps search runs for the first view only: the count does not depend on the
+// view, so later views of the same volume, isovalues and budget reuse the eps it found.
+TEST_F(Daemon, BudgetSearchRunsOnceAndLaterViewsReuseItsEps) {
+  constexpr int64_t kBudget = 12345;  // used by no other test of this daemon
+  auto c = Connect();
+  const glm::dvec3 eyes[3] = {{2.5, 1.8, 3.1}, {-3.0, 0.5, 1.0}, {0.2, -2.8, -1.5}};
+  PreparedVolume local = Local("buckyball:65");
+  double first_eps = -1;
+  for (int i = 0; i < 3; ++i) {
+    SCOPED_TRACE(i);
+    pb::ViewRequest v = MakeView("buckyball:65", 60 + i, 0.0, eyes[i], pb::RAW);
+    v.set_triangle_budget(kBudget);
+    auto frame = c->Fetch(v, nullptr);
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    EXPECT_LE(frame->stats.triangles(), kBudget);
+    if (i == 0) {
+      EXPECT_GT(frame->stats.budget_passes(), 2);
+      first_eps = frame->stats.eps_used();
+    } else {
+      EXPECT_EQ(frame->stats.budget_passes(), 0);
+      EXPECT_EQ(frame->stats.eps_used(), first_eps);
+    }
+    // The remembered eps gives exactly the frame a direct extraction at that eps gives.
+    auto direct = Extract(*local.hierarchy, local.grid_to_world,
+                          DirectRequest(frame->stats.eps_used(), eyes[i]));
+    ASSERT_TRUE(direct.ok());
+    ExpectSameFrame(direct->mesh, frame->mesh, 0.0f);
+  }
+}
+
 TEST_F(Daemon, FetchCommandWritesTheFrame) {
   const std::string out = scratch_->path() + "/fetched.ply";
   const std::string cmd = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
