@@ -275,6 +275,16 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   std::vector<uint32_t> to_global;
   std::atomic<bool> cancelled{false};
   OrderedMesh& m = result.mesh;
+  if (r.budget > 0) {
+    // The frame fits the budget: growing the arrays to it by doubling would copy what the join
+    // already copied (~1/3 of the join's time at 1 M triangles). Isosurface meshes have about
+    // half as many vertices as triangles. Untouched capacity costs no memory.
+    const size_t t = size_t(std::min<int64_t>(r.budget, int64_t{1} << 24));
+    m.triangles.reserve(3 * t);
+    m.surface.reserve(t);
+    m.positions.reserve(3 * (t / 2 + 1024));
+    m.normals.reserve(3 * (t / 2 + 1024));
+  }
   double join_ms = 0;
 
   auto append = [&](SubtreeMesh& part) {
