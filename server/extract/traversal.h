@@ -75,6 +75,13 @@ struct Context {
   const ReferenceTets* tables = nullptr;
   const MarchingTets* cases = nullptr;
   uint8_t negative[kNumTetClasses];  // 1: the class's canonical vertex order is left-handed
+  // Separating planes per class as small integer normals (a positive multiple of
+  // ReferenceTet::plane_normal), and per request: perspective, normal . eye (grid space), so
+  // the eye's side of a plane through grid point x is an exact integer dot product and one
+  // subtraction; orthographic, whether child 0 is drawn first (the same for every node).
+  int8_t plane[kNumTetClasses][3];
+  double plane_eye[kNumTetClasses];
+  uint8_t ortho_child0_first[kNumTetClasses];
   // 1 / (real length of one normalised class unit) per level: half the level's cube cell.
   double inv_unit[3 * 16 + 1];
 
@@ -146,11 +153,18 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
   const PackedPoint points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
   const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
-  bool child0_first = true;
+  bool child0_first = true;  // unless the eye is on child 0's side
   if (c.ordered) {
-    const double side = c.orthographic ? -glm::dot(rt.plane_normal, c.dir)
-                                       : glm::dot(rt.plane_normal, c.eye - glm::dvec3(Unpack(x)));
-    child0_first = side <= 0;  // eye on child 1's side: child 0 is farther
+    const int cls = t.cls.value;
+    if (c.orthographic) {
+      child0_first = c.ortho_child0_first[cls];
+    } else {
+      const int8_t* n = c.plane[cls];
+      const int64_t nx = n[0] * int64_t(x & kFieldMask) +
+                         n[1] * int64_t((x >> kFieldBits) & kFieldMask) +
+                         n[2] * int64_t(x >> (2 * kFieldBits));
+      child0_first = c.plane_eye[cls] <= double(nx);
+    }
   }
   for (int ch = 0; ch < 2; ++ch) {
     Node& o = *((ch == 0) == child0_first ? first : second);
