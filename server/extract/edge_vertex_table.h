@@ -31,10 +31,10 @@ class EdgeVertexTable {
   // Returns the vertex stored for key, or kMissing after reserving the slot for `fresh`
   // (the caller then creates vertex `fresh`).
   uint32_t FindOrInsert(uint64_t key, uint32_t fresh) {
-    if (2 * (size_ + 1) > slots_.size()) Grow();
+    if (size_ >= grow_at_) Grow();
     size_t i = Hash(key);
     for (;;) {
-      Slot& s = slots_[i];
+      Slot& s = data_[i];
       if (s.generation != generation_) {
         s = Slot{key, fresh, generation_};
         ++size_;
@@ -64,6 +64,8 @@ class EdgeVertexTable {
   size_t Hash(uint64_t k) const { return size_t((k * 0x9e3779b97f4a7c15ull) >> shift_); }
   void Allocate(size_t capacity) {
     slots_.assign(capacity, Slot{0, 0, 0});
+    data_ = slots_.data();
+    grow_at_ = capacity / 2;  // at most half full: probe runs stay short
     mask_ = capacity - 1;
     shift_ = 64 - __builtin_ctzll(capacity);
     generation_ = 1;
@@ -79,6 +81,8 @@ class EdgeVertexTable {
   }
 
   std::vector<Slot> slots_;
+  Slot* data_ = nullptr;  // slots_.data(), and the bound below, without vector arithmetic
+  size_t grow_at_ = 0;
   size_t mask_ = 0;
   int shift_ = 64;
   size_t size_ = 0;
