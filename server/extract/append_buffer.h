@@ -29,7 +29,7 @@ class AppendBuffer {
   void clear() { size_ = 0; }
 
  private:
-  void Grow(size_t needed) {
+  __attribute__((noinline)) void Grow(size_t needed) {  // rare: kept out of callers' frames
     size_t capacity = capacity_ ? 2 * capacity_ : 1024;
     while (capacity < needed) capacity *= 2;
     std::unique_ptr<T[]> bigger(new T[capacity]);  // trivial T: left uninitialised

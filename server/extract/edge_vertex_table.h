@@ -71,7 +71,7 @@ class EdgeVertexTable {
     generation_ = 1;
     size_ = 0;
   }
-  void Grow() {
+  __attribute__((noinline)) void Grow() {  // rare: kept out of the lookup's frame
     std::vector<Slot> old;
     old.swap(slots_);
     const uint32_t gen = generation_;
