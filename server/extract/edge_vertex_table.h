@@ -18,6 +18,9 @@ class EdgeVertexTable {
   explicit EdgeVertexTable(size_t initial_capacity = 1 << 12) {
     Allocate(RoundUp(initial_capacity));
   }
+  // data_ points into slots_: a copy or a move would leave it pointing at another table.
+  EdgeVertexTable(const EdgeVertexTable&) = delete;
+  EdgeVertexTable& operator=(const EdgeVertexTable&) = delete;
 
   void Reset() {
     ++generation_;

@@ -370,9 +370,10 @@ class Traverser {
       std::swap(fa, fb);
       d = -d;
     }
-    // Single precision: a grid coordinate below 2^13 keeps ~1e-3 voxel even in the last bit,
-    // far below the codec's quantization step.
-    const float tt = (c_.iso[s] - fa) / (fb - fa);
+    // The parameter in double (float differences of values near FLT_MAX overflow), the point
+    // in single precision: a grid coordinate below 2^13 keeps ~1e-3 voxel in its last bit, far
+    // below the codec's quantization step.
+    const float tt = float((double(c_.iso[s]) - fa) / (double(fb) - fa));
     const glm::vec3 pg = glm::vec3(a) + tt * glm::vec3(d);
     const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
     glm::vec3 grad = glm::vec3(t.g);

@@ -340,11 +340,11 @@ class HierarchyBuilder {
     for (int z = 0; z < own[2]; ++z)
       for (int y = 0; y < own[1]; ++y) {
         const int gy = o[1] + y * u, gz = o[2] + z * u;
-        const uint32_t oyz = offset_[1][gy] + offset_[2][gz];
+        const uint64_t oyz = offset_[1][gy] + offset_[2][gz];
         const int p = z * kTZ + y * kTY;
         const bool yz_odd = (y | z) & 1;
         for (int x = yz_odd ? 0 : 1; x < own[0]; x += yz_odd ? 1 : 2) {
-          const uint32_t i = offset_[0][o[0] + x * u] + oyz;
+          const uint64_t i = offset_[0][o[0] + x * u] + oyz;
           bricks[i >> (3 * HierarchyBrick::kLog2)].eta[i & (HierarchyBrick::kPoints - 1)] =
               EncodeEtaRoundingUp(e[p + x]);
         }
@@ -360,7 +360,7 @@ class HierarchyBuilder {
 
   float* s_;
   HierarchyBrick* bricks_;
-  const uint32_t* offset_[3];
+  const uint64_t* offset_[3];
   int k_, n_, last_;
 };
 
@@ -417,7 +417,7 @@ absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
     eta_bytes_[a].resize(n);
     for (size_t c = 0; c < n; ++c) {
       const size_t brick = (c >> b) * brick_stride, inside = (c & m) << (a * b);
-      axis_offset_[a][c] = uint32_t((brick << (3 * b)) | inside);
+      axis_offset_[a][c] = (brick << (3 * b)) | inside;
       value_bytes_[a][c] = brick * sizeof(HierarchyBrick) + inside * sizeof(float);
       eta_bytes_[a][c] = brick * sizeof(HierarchyBrick) + inside * sizeof(uint16_t) +
                          (a == 0 ? offsetof(HierarchyBrick, eta) : 0);

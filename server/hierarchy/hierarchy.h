@@ -76,7 +76,7 @@ class Hierarchy {
     return size_t(axis_offset_[0][x]) + axis_offset_[1][y] + axis_offset_[2][z];
   }
   // axis_offsets()[a][c]: the index contribution of coordinate c on axis a.
-  const std::array<std::vector<uint32_t>, 3>& axis_offsets() const { return axis_offset_; }
+  const std::array<std::vector<uint64_t>, 3>& axis_offsets() const { return axis_offset_; }
   // The same separation in bytes from bricks(): the sum over the axes of value_byte_offsets()
   // is the byte offset of the point's sample, of eta_byte_offsets() that of its eta. The
   // extractor's hot loops address the store with these (a sum and a load, where the index
@@ -115,7 +115,8 @@ class Hierarchy {
   int n_ = 0;
   std::array<int, 3> data_dims_{0, 0, 0};
   UninitializedVector<HierarchyBrick> bricks_;
-  std::array<std::vector<uint32_t>, 3> axis_offset_;
+  // 64-bit: at k = 11 and 12 the cube has 8.7e9 and 6.9e10 point slots.
+  std::array<std::vector<uint64_t>, 3> axis_offset_;
   std::array<std::vector<uint64_t>, 3> value_bytes_, eta_bytes_;
 };
 

@@ -197,8 +197,9 @@ TriKey MakeKey(int surface, std::array<glm::vec3, 3> p) {
 
 // Brute-force marching tetrahedra over the reflected Kuhn triangulation, built directly from
 // the grid (each unit cube split around the diagonal through its all-even corner), with the
-// same conventions: a vertex is inside when f >= iso, crossings interpolated (in single
-// precision) from the lexicographically smaller endpoint, quads split along the shorter diagonal (ties by position).
+// same conventions: a vertex is inside when f >= iso, crossings interpolated (parameter in
+// double, point in single precision) from the lexicographically smaller endpoint, quads split
+// along the shorter diagonal (ties by position).
 std::multiset<TriKey> BruteForce(const Hierarchy& h, const std::vector<float>& iso) {
   std::multiset<TriKey> tris;
   const int n = h.n();
@@ -224,7 +225,7 @@ std::multiset<TriKey> BruteForce(const Hierarchy& h, const std::vector<float>& i
               float fa = f[i], fb = f[j];
               if (std::tie(b.x, b.y, b.z) < std::tie(a.x, a.y, a.z))
                 std::swap(a, b), std::swap(fa, fb);
-              const float t = (iso[s] - fa) / (fb - fa);
+              const float t = float((double(iso[s]) - fa) / (double(fb) - fa));
               return glm::vec3(a) + t * glm::vec3(b - a);
             };
             std::vector<int> in, out;

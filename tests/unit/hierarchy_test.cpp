@@ -157,6 +157,34 @@ TEST(Hierarchy, StoredEtaEqualsReferenceRecursionBitForBit) {
   }
 }
 
+// The extractor addresses the store through the per-axis byte-offset tables: their sums must
+// land on exactly the sample and eta the index names, for every point, including the points of
+// partial bricks at the far faces (k = 4, 5), and the index must give every point its own slot.
+TEST(Hierarchy, ByteOffsetTablesAddressTheIndexedSampleAndEta) {
+  const auto& vol = TestVolumes().front();
+  for (int k = 1; k <= 5; ++k) {
+    const HierarchyPtr h = Build(k, vol, 1);
+    const int n = h->n();
+    const char* store = reinterpret_cast<const char*>(h->bricks());
+    const auto& vb = h->value_byte_offsets();
+    const auto& eb = h->eta_byte_offsets();
+    std::set<size_t> slots;
+    for (int z = 0; z < n; ++z)
+      for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x) {
+          const size_t i = h->index(x, y, z);
+          ASSERT_TRUE(slots.insert(i).second) << "k " << k << " at " << x << " " << y << " " << z;
+          const char* value = store + vb[0][x] + vb[1][y] + vb[2][z];
+          const char* eta = store + eb[0][x] + eb[1][y] + eb[2][z];
+          ASSERT_EQ(value, reinterpret_cast<const char*>(&h->bricks()[i >> 9].value[i & 511]))
+              << "k " << k << " at " << x << " " << y << " " << z;
+          ASSERT_EQ(eta, reinterpret_cast<const char*>(&h->bricks()[i >> 9].eta[i & 511]))
+              << "k " << k << " at " << x << " " << y << " " << z;
+          ASSERT_EQ(*reinterpret_cast<const float*>(value), h->sample(x, y, z));
+        }
+  }
+}
+
 TEST(Hierarchy, SaturationIsMonotoneAlongTheTree) {
   for (const auto& vol : TestVolumes()) {
     const int k = 4;
