@@ -26,6 +26,15 @@ struct GatheredChunk {
   size_t triangle_count() const { return surface.size(); }
 };
 
+// A decoded chunk, checked, before it is appended to the caller's mesh.
+struct DecodedChunk {
+  std::vector<float> positions;  // 3 per local vertex
+  std::vector<float> normals;    // 3 per local vertex; empty when the chunk has none
+  std::vector<uint8_t> tags;     // per local vertex: surface | "normal undefined" bit (0x80)
+  std::vector<uint32_t> triangles;
+  std::vector<uint8_t> triangle_surface;
+};
+
 // Lookup state that GatherTriangleRange calls over one mesh can share: a table indexed by mesh
 // vertex that is sized once and never cleared (entries carry the number of the call that set
 // them). For a producer that gathers consecutive ranges of a mesh that keeps growing.

@@ -285,15 +285,6 @@ absl::Status ReadDracoPointCloudCount(const char* data, size_t size, uint32_t* p
 
 namespace {
 
-// A decoded chunk, checked, before it is appended.
-struct DecodedChunk {
-  std::vector<float> positions;
-  std::vector<float> normals;  // empty when the chunk has none
-  std::vector<uint8_t> tags;   // per vertex: surface | kUndefinedNormalBit
-  std::vector<uint32_t> triangles;
-  std::vector<uint8_t> triangle_surface;
-};
-
 // Copies the chunk attributes out of a decoded Draco mesh or point cloud.
 absl::Status ReadVertexAttributes(const draco::PointCloud& points, uint32_t vertex_count,
                                   bool expect_normals, DecodedChunk* out) {
@@ -367,6 +358,11 @@ absl::Status Append(const DecodedChunk& chunk, OrderedMesh* append_to) {
 }
 
 }  // namespace
+
+absl::Status AppendDecodedChunk(DecodedChunk* chunk, OrderedMesh* append_to) {
+  ISOSTREAM_RETURN_IF_ERROR(AssignTriangleSurfaces(chunk));
+  return Append(*chunk, append_to);
+}
 
 absl::Status DecodeDracoMesh(const char* data, size_t size, uint32_t triangle_count,
                              uint32_t vertex_count, bool expect_normals, OrderedMesh* append_to) {

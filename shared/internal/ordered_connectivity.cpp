@@ -1,11 +1,10 @@
 #include "shared/internal/ordered_connectivity.h"
 
+#include "shared/internal/symbol_stream.h"
+
 #include <absl/strings/str_cat.h>
 #include <draco/compression/config/compression_shared.h>
-#include <draco/compression/entropy/symbol_decoding.h>
-#include <draco/compression/entropy/symbol_encoding.h>
 #include <draco/core/decoder_buffer.h>
-#include <draco/core/encoder_buffer.h>
 
 #include <algorithm>
 #include <limits>
@@ -138,22 +137,13 @@ class EdgeIndex {
   Slot slots_[size_t{1} << kBits];
 };
 
-bool AppendSymbols(const std::vector<uint32_t>& symbols, std::string* out) {
-  if (symbols.empty()) return true;
-  draco::EncoderBuffer buffer;
-  // Draco's default compression level; higher levels change nothing on these small alphabets.
-  if (!draco::EncodeSymbols(symbols.data(), static_cast<int>(symbols.size()), 1, nullptr,
-                            &buffer)) {
-    return false;
-  }
-  out->append(buffer.data(), buffer.size());
-  return true;
+bool AppendArray(const std::vector<uint32_t>& symbols, std::string* out) {
+  return symbols.empty() || AppendSymbols(symbols.data(), symbols.size(), 1, out);
 }
 
-bool ReadSymbols(draco::DecoderBuffer* buffer, size_t count, std::vector<uint32_t>* symbols) {
+bool ReadArray(draco::DecoderBuffer* buffer, size_t count, std::vector<uint32_t>* symbols) {
   symbols->resize(count);
-  if (count == 0) return true;
-  return draco::DecodeSymbols(static_cast<uint32_t>(count), 1, buffer, symbols->data());
+  return count == 0 || ReadSymbols(buffer, count, 1, symbols->data());
 }
 
 }  // namespace
@@ -221,8 +211,8 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
     return absl::InvalidArgumentError(
         absl::StrCat("the triangles use ", next, " of ", vertex_count, " vertices"));
   }
-  if (!AppendSymbols(triangle_symbols, out) || !AppendSymbols(corner_symbols, out) ||
-      !AppendSymbols(explicit_values, out)) {
+  if (!AppendArray(triangle_symbols, out) || !AppendArray(corner_symbols, out) ||
+      !AppendArray(explicit_values, out)) {
     return absl::InternalError("Draco's symbol encoder failed on the connectivity");
   }
   return absl::OkStatus();
@@ -239,7 +229,7 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
   // pre-2.0 layout); EncodeSymbols writes the current one.
   buffer.Init(data, size, draco::kDracoMeshBitstreamVersion);
   std::vector<uint32_t> triangle_symbols;
-  if (!ReadSymbols(&buffer, triangle_count, &triangle_symbols)) {
+  if (!ReadArray(&buffer, triangle_count, &triangle_symbols)) {
     return absl::DataLossError("connectivity: triangle symbols do not decode");
   }
   size_t corner_count = 0;
@@ -248,7 +238,7 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
     corner_count += s == kNoEdge ? 3 : 1;
   }
   std::vector<uint32_t> corner_symbols;
-  if (!ReadSymbols(&buffer, corner_count, &corner_symbols)) {
+  if (!ReadArray(&buffer, corner_count, &corner_symbols)) {
     return absl::DataLossError("connectivity: corner symbols do not decode");
   }
   size_t explicit_count = 0;
@@ -257,7 +247,7 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
     explicit_count += s == kExplicitCorner;
   }
   std::vector<uint32_t> explicit_values;
-  if (!ReadSymbols(&buffer, explicit_count, &explicit_values)) {
+  if (!ReadArray(&buffer, explicit_count, &explicit_values)) {
     return absl::DataLossError("connectivity: explicit corners do not decode");
   }
   if (buffer.remaining_size() != 0) {
