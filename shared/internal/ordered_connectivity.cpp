@@ -3,8 +3,6 @@
 #include "shared/internal/symbol_stream.h"
 
 #include <absl/strings/str_cat.h>
-#include <draco/compression/config/compression_shared.h>
-#include <draco/core/decoder_buffer.h>
 
 #include <algorithm>
 #include <limits>
@@ -137,13 +135,14 @@ class EdgeIndex {
   Slot slots_[size_t{1} << kBits];
 };
 
-bool AppendArray(const std::vector<uint32_t>& symbols, std::string* out) {
-  return symbols.empty() || AppendSymbols(symbols.data(), symbols.size(), 1, out);
+void AppendArray(const std::vector<uint32_t>& symbols, std::string* out) {
+  if (!symbols.empty()) AppendSymbols(symbols.data(), symbols.size(), out);
 }
 
-bool ReadArray(draco::DecoderBuffer* buffer, size_t count, std::vector<uint32_t>* symbols) {
+bool ReadArray(const char* data, size_t size, size_t* at, size_t count,
+               std::vector<uint32_t>* symbols) {
   symbols->resize(count);
-  return count == 0 || ReadSymbols(buffer, count, 1, symbols->data());
+  return count == 0 || ReadSymbols(data, size, at, count, symbols->data());
 }
 
 }  // namespace
@@ -211,10 +210,9 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
     return absl::InvalidArgumentError(
         absl::StrCat("the triangles use ", next, " of ", vertex_count, " vertices"));
   }
-  if (!AppendArray(triangle_symbols, out) || !AppendArray(corner_symbols, out) ||
-      !AppendArray(explicit_values, out)) {
-    return absl::InternalError("Draco's symbol encoder failed on the connectivity");
-  }
+  AppendArray(triangle_symbols, out);
+  AppendArray(corner_symbols, out);
+  AppendArray(explicit_values, out);
   return absl::OkStatus();
 }
 
@@ -224,12 +222,9 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
       vertex_count > std::numeric_limits<uint32_t>::max()) {
     return absl::DataLossError("connectivity counts out of range");
   }
-  draco::DecoderBuffer buffer;
-  // Symbol streams are read according to the buffer's bitstream version (0, unset, selects a
-  // pre-2.0 layout); EncodeSymbols writes the current one.
-  buffer.Init(data, size, draco::kDracoMeshBitstreamVersion);
+  size_t read_at = 0;
   std::vector<uint32_t> triangle_symbols;
-  if (!ReadArray(&buffer, triangle_count, &triangle_symbols)) {
+  if (!ReadArray(data, size, &read_at, triangle_count, &triangle_symbols)) {
     return absl::DataLossError("connectivity: triangle symbols do not decode");
   }
   size_t corner_count = 0;
@@ -238,7 +233,7 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
     corner_count += s == kNoEdge ? 3 : 1;
   }
   std::vector<uint32_t> corner_symbols;
-  if (!ReadArray(&buffer, corner_count, &corner_symbols)) {
+  if (!ReadArray(data, size, &read_at, corner_count, &corner_symbols)) {
     return absl::DataLossError("connectivity: corner symbols do not decode");
   }
   size_t explicit_count = 0;
@@ -247,10 +242,10 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
     explicit_count += s == kExplicitCorner;
   }
   std::vector<uint32_t> explicit_values;
-  if (!ReadArray(&buffer, explicit_count, &explicit_values)) {
+  if (!ReadArray(data, size, &read_at, explicit_count, &explicit_values)) {
     return absl::DataLossError("connectivity: explicit corners do not decode");
   }
-  if (buffer.remaining_size() != 0) {
+  if (read_at != size) {
     return absl::DataLossError("connectivity: bytes left over after the last symbol");
   }
 

@@ -1,28 +1,256 @@
 #include "shared/internal/symbol_stream.h"
 
-#include <draco/compression/entropy/symbol_decoding.h>
-#include <draco/compression/entropy/symbol_encoding.h>
-#include <draco/core/decoder_buffer.h>
-#include <draco/core/encoder_buffer.h>
-
-#include <limits>
+#include <algorithm>
+#include <cstring>
+#include <vector>
 
 namespace isostream::internal {
+namespace {
 
-bool AppendSymbols(const uint32_t* symbols, size_t count, int components, std::string* out) {
-  if (count > size_t{std::numeric_limits<int>::max()}) return false;
-  draco::EncoderBuffer buffer;
-  // Draco's default compression level; higher levels change nothing on these alphabets.
-  if (!draco::EncodeSymbols(symbols, static_cast<int>(count), components, nullptr, &buffer)) {
-    return false;
-  }
-  out->append(buffer.data(), buffer.size());
-  return true;
+constexpr int kProbabilityBits = 12;
+constexpr uint32_t kTotal = uint32_t{1} << kProbabilityBits;
+constexpr uint32_t kDirectTokens = 128;
+// Direct tokens, then 4 per bit width from 8 to 32.
+constexpr uint32_t kMaxTokens = kDirectTokens + 4 * 25;
+// rANS state interval [kLow, 256 kLow): renormalizing by bytes keeps the state below 2^31.
+constexpr uint32_t kLow = uint32_t{1} << 23;
+
+// Number of bits needed to write v (0 for 0).
+uint32_t BitWidth(uint32_t v) { return v == 0 ? 0 : 32 - static_cast<uint32_t>(__builtin_clz(v)); }
+
+struct Token {
+  uint32_t token;
+  uint32_t extra_bits;  // how many
+  uint32_t extra;       // their value
+};
+
+Token Tokenize(uint32_t v) {
+  if (v < kDirectTokens) return {v, 0, 0};
+  const uint32_t width = BitWidth(v);  // 8..32
+  const uint32_t bits = width - 3;
+  return {kDirectTokens + 4 * (width - 8) + ((v >> bits) & 3), bits, v & ((uint32_t{1} << bits) - 1)};
 }
 
-bool ReadSymbols(draco::DecoderBuffer* buffer, size_t count, int components, uint32_t* symbols) {
-  if (count > std::numeric_limits<uint32_t>::max()) return false;
-  return draco::DecodeSymbols(static_cast<uint32_t>(count), components, buffer, symbols);
+void PutVarint(uint32_t v, std::string* out) {
+  while (v >= 0x80) {
+    out->push_back(static_cast<char>(v | 0x80));
+    v >>= 7;
+  }
+  out->push_back(static_cast<char>(v));
+}
+
+bool GetVarint(const uint8_t* data, size_t size, size_t* at, uint32_t* value) {
+  uint64_t v = 0;
+  for (int shift = 0; shift < 35; shift += 7) {
+    if (*at >= size) return false;
+    const uint8_t byte = data[(*at)++];
+    v |= uint64_t{byte & 0x7fu} << shift;
+    if (!(byte & 0x80)) {
+      if (v > 0xffffffffu) return false;
+      *value = static_cast<uint32_t>(v);
+      return true;
+    }
+  }
+  return false;
+}
+
+// Token counts scaled to frequencies summing to kTotal, every token that occurs getting at
+// least 1.
+void Normalize(const uint32_t* counts, uint32_t alphabet, size_t total, uint32_t* freq) {
+  int64_t sum = 0;
+  uint32_t largest = 0;
+  for (uint32_t t = 0; t < alphabet; ++t) {
+    freq[t] = 0;
+    if (counts[t] == 0) continue;
+    const uint64_t scaled = (uint64_t{counts[t]} * kTotal + total / 2) / total;
+    freq[t] = std::max<uint32_t>(1, static_cast<uint32_t>(scaled));
+    sum += freq[t];
+    if (counts[t] > counts[largest]) largest = t;
+  }
+  // Rounding leaves sum within about one per token of kTotal: settle the difference on the
+  // largest frequencies, which it changes least in proportion.
+  freq[largest] += static_cast<uint32_t>(std::max<int64_t>(kTotal - sum, 0));
+  sum = std::max<int64_t>(sum, kTotal);
+  while (sum > kTotal) {
+    uint32_t top = 0;
+    for (uint32_t t = 1; t < alphabet; ++t) top = freq[t] > freq[top] ? t : top;
+    --freq[top];
+    --sum;
+  }
+}
+
+// Exact x / freq for x < 2^31 by one multiply: m = floor(2^(31+s) / freq) + 1 with 2^s >= freq
+// (Granlund and Montgomery's round-up method; m < 2^33, so x * m fits in 64 bits).
+struct EncodeSymbol {
+  uint64_t multiplier;
+  uint32_t shift;
+  uint32_t freq;
+  uint32_t start;
+  uint32_t renorm_limit;  // the state must be below this before the symbol is pushed
+};
+
+class BitWriter {
+ public:
+  explicit BitWriter(std::string* out) : out_(out) {}
+  void Put(uint32_t value, uint32_t bits) {
+    acc_ |= uint64_t{value} << count_;
+    count_ += bits;
+    while (count_ >= 8) {
+      out_->push_back(static_cast<char>(acc_));
+      acc_ >>= 8;
+      count_ -= 8;
+    }
+  }
+  void Flush() {
+    if (count_ > 0) out_->push_back(static_cast<char>(acc_));
+    acc_ = 0;
+    count_ = 0;
+  }
+
+ private:
+  std::string* out_;
+  uint64_t acc_ = 0;
+  uint32_t count_ = 0;
+};
+
+class BitReader {
+ public:
+  BitReader(const uint8_t* data, size_t size) : p_(data), end_(data + size) {}
+  // False if the stream holds fewer than `bits` (<= 29) more bits.
+  bool Get(uint32_t bits, uint32_t* value) {
+    while (count_ < bits) {
+      if (p_ == end_) return false;
+      acc_ |= uint64_t{*p_++} << count_;
+      count_ += 8;
+    }
+    *value = static_cast<uint32_t>(acc_ & ((uint64_t{1} << bits) - 1));
+    acc_ >>= bits;
+    count_ -= bits;
+    return true;
+  }
+  // True when every byte was read and the padding bits are zero.
+  bool AtEnd() const { return p_ == end_ && count_ < 8 && acc_ == 0; }
+
+ private:
+  const uint8_t* p_;
+  const uint8_t* end_;
+  uint64_t acc_ = 0;
+  uint32_t count_ = 0;
+};
+
+}  // namespace
+
+void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
+  std::vector<uint8_t> tokens(count);
+  uint32_t counts[kMaxTokens] = {};
+  uint32_t alphabet = 1;
+  std::string extra;
+  extra.reserve(count / 2);
+  BitWriter extra_bits(&extra);
+  for (size_t i = 0; i < count; ++i) {
+    const Token t = Tokenize(symbols[i]);
+    tokens[i] = static_cast<uint8_t>(t.token);
+    ++counts[t.token];
+    alphabet = std::max(alphabet, t.token + 1);
+    if (t.extra_bits) extra_bits.Put(t.extra, t.extra_bits);
+  }
+  extra_bits.Flush();
+
+  uint32_t freq[kMaxTokens];
+  Normalize(counts, alphabet, count, freq);
+  PutVarint(alphabet, out);
+  EncodeSymbol table[kMaxTokens];
+  uint32_t start = 0;
+  for (uint32_t t = 0; t < alphabet; ++t) {
+    PutVarint(freq[t], out);
+    EncodeSymbol& e = table[t];
+    e.freq = freq[t];
+    e.start = start;
+    start += freq[t];
+    if (e.freq == 0) continue;
+    const uint32_t s = BitWidth(e.freq - 1);  // 2^s >= freq
+    e.shift = 31 + s;
+    e.multiplier = ((uint64_t{1} << e.shift) / e.freq) + 1;
+    e.renorm_limit = ((kLow >> kProbabilityBits) << 8) * e.freq;
+  }
+
+  // rANS codes last symbol first, so the stream is written back to front. A symbol emits at
+  // most two bytes (the state is below 2^31 and shrinks below 2^19 freq before the push).
+  std::vector<uint8_t> stream(2 * count + 4);
+  uint8_t* end = stream.data() + stream.size();
+  uint8_t* p = end;
+  uint32_t x = kLow;
+  for (size_t i = count; i-- > 0;) {
+    const EncodeSymbol& e = table[tokens[i]];
+    while (x >= e.renorm_limit) {
+      *--p = static_cast<uint8_t>(x);
+      x >>= 8;
+    }
+    const uint32_t q = static_cast<uint32_t>((x * e.multiplier) >> e.shift);
+    x = (q << kProbabilityBits) + (x - q * e.freq) + e.start;
+  }
+  p -= 4;
+  std::memcpy(p, &x, 4);  // little-endian host (frame_codec.cpp asserts it)
+  PutVarint(static_cast<uint32_t>(end - p), out);
+  out->append(reinterpret_cast<const char*>(p), static_cast<size_t>(end - p));
+  PutVarint(static_cast<uint32_t>(extra.size()), out);
+  out->append(extra);
+}
+
+bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32_t* symbols) {
+  const auto* bytes = reinterpret_cast<const uint8_t*>(data);
+  uint32_t alphabet = 0;
+  if (!GetVarint(bytes, size, at, &alphabet) || alphabet == 0 || alphabet > kMaxTokens) {
+    return false;
+  }
+  uint32_t freq[kMaxTokens], start[kMaxTokens];
+  uint32_t sum = 0;
+  for (uint32_t t = 0; t < alphabet; ++t) {
+    if (!GetVarint(bytes, size, at, &freq[t]) || freq[t] > kTotal) return false;
+    start[t] = sum;
+    sum += freq[t];
+    if (sum > kTotal) return false;
+  }
+  if (sum != kTotal) return false;
+  uint8_t slot_token[kTotal];
+  for (uint32_t t = 0; t < alphabet; ++t) {
+    std::memset(slot_token + start[t], static_cast<int>(t), freq[t]);
+  }
+
+  uint32_t rans_size = 0, extra_size = 0;
+  if (!GetVarint(bytes, size, at, &rans_size) || rans_size < 4 || rans_size > size - *at) {
+    return false;
+  }
+  const uint8_t* p = bytes + *at;
+  const uint8_t* rans_end = p + rans_size;
+  *at += rans_size;
+  if (!GetVarint(bytes, size, at, &extra_size) || extra_size > size - *at) return false;
+  BitReader extra_bits(bytes + *at, extra_size);
+  *at += extra_size;
+
+  uint32_t x;
+  std::memcpy(&x, p, 4);
+  p += 4;
+  if (x < kLow || x >= (kLow << 8)) return false;
+  for (size_t i = 0; i < count; ++i) {
+    const uint32_t slot = x & (kTotal - 1);
+    const uint32_t t = slot_token[slot];
+    x = freq[t] * (x >> kProbabilityBits) + slot - start[t];
+    while (x < kLow) {
+      if (p == rans_end) return false;
+      x = (x << 8) | *p++;
+    }
+    if (t < kDirectTokens) {
+      symbols[i] = t;
+    } else {
+      const uint32_t width = (t - kDirectTokens) / 4 + 8;
+      const uint32_t bits = width - 3;
+      uint32_t low;
+      if (!extra_bits.Get(bits, &low)) return false;
+      symbols[i] = ((4 + ((t - kDirectTokens) & 3)) << bits) | low;
+    }
+  }
+  return x == kLow && p == rans_end && extra_bits.AtEnd();
 }
 
 }  // namespace isostream::internal

@@ -1,26 +1,35 @@
 // Internal to shared/: the entropy coder behind the edge-cache chunk's symbol arrays
-// (connectivity and vertex attributes). One place, so the coder can change without touching
-// the models that produce the symbols.
+// (connectivity and vertex attributes), isostream's own: a static rANS coder with byte-wise
+// renormalization over a small token alphabet, plus raw extra bits for large values.
+//
+// A symbol v (uint32) becomes a token and 0-29 extra bits: v < 16 is token v with no extra
+// bits; otherwise, with b = bit width of v (5..32), token 16 + 4 (b - 5) + the two bits below
+// v's leading one, and the b - 3 bits below those as extra bits. Tokens are at most 127.
+// Most symbols here are small (cache positions, deltas of neighbouring vertices), so the
+// tokens carry nearly all the information and the extra bits are close to uniform.
+//
+// One array, exactly:
+//   varint   A, the token alphabet size (largest token + 1), 1..128
+//   varint   A frequencies, each 0..4096, summing to 4096 (kProbabilityBits = 12)
+//   varint   R, then R bytes: the rANS stream (the final state, 4 bytes little-endian, first)
+//   varint   E, then E bytes: the extra bits, least significant first, symbol order, the last
+//            byte zero-padded
+// Varints are LEB128 (7 bits a byte, low first, at most 5 bytes). The decoder checks every
+// field, refuses to read past either stream, requires the rANS state to end where the encoder
+// started it and both streams to be consumed exactly.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
 
-namespace draco {
-class DecoderBuffer;
-}  // namespace draco
-
 namespace isostream::internal {
 
-// Appends `count` symbols (count > 0), coded with Draco's rANS symbol coder; `components`
-// values that belong together (x, y, z of one position) let it pick per-group bit lengths.
-// False if the coder fails.
-bool AppendSymbols(const uint32_t* symbols, size_t count, int components, std::string* out);
+// Appends `count` symbols (count > 0) to `out`.
+void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out);
 
-// Reads `count` symbols (count > 0) written by AppendSymbols from `buffer`, which must have
-// been initialised with draco::kDracoMeshBitstreamVersion. False on any malformed input;
-// `symbols` must hold `count` values.
-bool ReadSymbols(draco::DecoderBuffer* buffer, size_t count, int components, uint32_t* symbols);
+// Reads one array of `count` symbols (count > 0) from data[*at, size) into `symbols` (room for
+// `count`) and advances *at past it. False on malformed input; `symbols` is then unspecified.
+bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32_t* symbols);
 
 }  // namespace isostream::internal

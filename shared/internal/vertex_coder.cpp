@@ -1,8 +1,6 @@
 #include "shared/internal/vertex_coder.h"
 
 #include <absl/strings/str_cat.h>
-#include <draco/compression/config/compression_shared.h>
-#include <draco/core/decoder_buffer.h>
 
 #include <cmath>
 #include <cstring>
@@ -106,7 +104,7 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
     symbols[v] = ZigZag(static_cast<int8_t>(static_cast<uint8_t>(tags[v] - previous_tag)));
     previous_tag = tags[v];
   }
-  bool ok = AppendSymbols(symbols.data(), vertex_count, 1, out);
+  AppendSymbols(symbols.data(), vertex_count, out);
 
   if (position_bits > 0) {
     const uint32_t max_q = (uint32_t{1} << position_bits) - 1;
@@ -124,7 +122,7 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
         previous[k] = q;
       }
     }
-    ok = ok && AppendSymbols(symbols.data(), 3 * vertex_count, 3, out);
+    AppendSymbols(symbols.data(), 3 * vertex_count, out);
   } else {
     out->append(reinterpret_cast<const char*>(chunk.positions.data()), 12 * vertex_count);
   }
@@ -145,7 +143,7 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
           previous[k] = st[k];
         }
       }
-      ok = ok && AppendSymbols(symbols.data(), n, 2, out);
+      AppendSymbols(symbols.data(), n, out);
     } else {
       for (size_t v = 0; v < vertex_count; ++v) {
         if (tags[v] & kUndefinedNormalBit) continue;
@@ -153,7 +151,6 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
       }
     }
   }
-  if (!ok) return absl::InternalError("the symbol encoder failed on the vertex attributes");
   return absl::OkStatus();
 }
 
@@ -185,12 +182,10 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
     if (!(box.range > 0.0f)) return absl::DataLossError("vertex part: quantization range <= 0");
   }
 
-  draco::DecoderBuffer buffer;
-  buffer.Init(data + at, size - at, draco::kDracoMeshBitstreamVersion);
   std::vector<uint32_t> symbols(3 * size_t{vertex_count});
 
   out->tags.resize(vertex_count);
-  if (!ReadSymbols(&buffer, vertex_count, 1, symbols.data())) {
+  if (!ReadSymbols(data, size, &at, vertex_count, symbols.data())) {
     return absl::DataLossError("vertex part: tags do not decode");
   }
   uint8_t tag = 0;
@@ -207,7 +202,7 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
 
   out->positions.resize(3 * size_t{vertex_count});
   if (position_bits > 0) {
-    if (!ReadSymbols(&buffer, 3 * size_t{vertex_count}, 3, symbols.data())) {
+    if (!ReadSymbols(data, size, &at, 3 * size_t{vertex_count}, symbols.data())) {
       return absl::DataLossError("vertex part: positions do not decode");
     }
     const uint32_t modulus = uint32_t{1} << position_bits;
@@ -223,11 +218,11 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
       }
     }
   } else {
-    if (buffer.remaining_size() < 12 * int64_t{vertex_count}) {
+    if (size - at < 12 * size_t{vertex_count}) {
       return absl::DataLossError("vertex part ends inside its float positions");
     }
-    std::memcpy(out->positions.data(), buffer.data_head(), 12 * size_t{vertex_count});
-    buffer.Advance(12 * int64_t{vertex_count});
+    std::memcpy(out->positions.data(), data + at, 12 * size_t{vertex_count});
+    at += 12 * size_t{vertex_count};
     for (float p : out->positions) {
       if (!std::isfinite(p)) return absl::DataLossError("vertex part: non-finite position");
     }
@@ -236,7 +231,7 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
   out->normals.assign(has_normals ? 3 * size_t{vertex_count} : 0, 0.0f);
   if (has_normals && defined_normals > 0) {
     if (normal_bits > 0) {
-      if (!ReadSymbols(&buffer, 2 * size_t{defined_normals}, 2, symbols.data())) {
+      if (!ReadSymbols(data, size, &at, 2 * size_t{defined_normals}, symbols.data())) {
         return absl::DataLossError("vertex part: normals do not decode");
       }
       const uint32_t center = (uint32_t{1} << (normal_bits - 1)) - 1;
@@ -255,10 +250,10 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
         OctahedralDecode(st[0], st[1], c, &out->normals[3 * size_t{v}]);
       }
     } else {
-      if (buffer.remaining_size() < 12 * int64_t{defined_normals}) {
+      if (size - at < 12 * size_t{defined_normals}) {
         return absl::DataLossError("vertex part ends inside its float normals");
       }
-      const char* p = buffer.data_head();
+      const char* p = data + at;
       for (uint32_t v = 0; v < vertex_count; ++v) {
         if (out->tags[v] & kUndefinedNormalBit) continue;
         float* n = &out->normals[3 * size_t{v}];
@@ -268,10 +263,10 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
           return absl::DataLossError("vertex part: non-finite normal");
         }
       }
-      buffer.Advance(12 * int64_t{defined_normals});
+      at += 12 * size_t{defined_normals};
     }
   }
-  if (buffer.remaining_size() != 0) {
+  if (at != size) {
     return absl::DataLossError("vertex part: bytes left over after the last attribute");
   }
   return absl::OkStatus();
