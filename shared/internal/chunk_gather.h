@@ -8,6 +8,7 @@
 
 #include "shared/ordered_mesh.h"
 #include "shared/status.h"
+#include "shared/uninitialized_vector.h"
 
 namespace isostream::internal {
 
@@ -15,12 +16,15 @@ namespace isostream::internal {
 // first use by the range's corners. A local vertex belongs to exactly one surface: a mesh vertex
 // used by triangles of two surfaces becomes two local vertices, so per-vertex encodings of the
 // surface (Draco attributes, glTF COLOR_0) stay exact.
+//
+// Uninitialized vectors: the gather sizes them for the worst case (3 vertices per triangle),
+// writes each element once and shrinks them, without zeroing first.
 struct GatheredChunk {
-  std::vector<float> positions;         // 3 per local vertex
-  std::vector<float> normals;           // 3 per local vertex; empty when the mesh has none
-  std::vector<uint8_t> vertex_surface;  // 1 per local vertex
-  std::vector<uint32_t> triangles;      // 3 local indices per triangle, in range order
-  std::vector<uint8_t> surface;         // 1 per triangle
+  UninitializedVector<float> positions;         // 3 per local vertex
+  UninitializedVector<float> normals;           // 3 per local vertex; empty when the mesh has none
+  UninitializedVector<uint8_t> vertex_surface;  // 1 per local vertex
+  UninitializedVector<uint32_t> triangles;      // 3 local indices per triangle, in range order
+  UninitializedVector<uint8_t> surface;         // 1 per triangle
 
   size_t vertex_count() const { return vertex_surface.size(); }
   size_t triangle_count() const { return surface.size(); }

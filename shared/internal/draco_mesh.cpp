@@ -131,7 +131,7 @@ DracoAttributeIds AddChunkAttributes(const GatheredChunk& chunk,
         AddAttribute(points, draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false,
                      chunk.normals.data(), chunk.normals.size() * sizeof(float));
   }
-  std::vector<uint8_t> tags(chunk.vertex_surface);
+  std::vector<uint8_t> tags(chunk.vertex_surface.begin(), chunk.vertex_surface.end());
   if (has_normals && settings.mark_undefined_normals) {
     for (size_t v = 0; v < vertex_count; ++v) {
       if (IsZero(&chunk.normals[3 * v])) tags[v] |= kUndefinedNormalBit;

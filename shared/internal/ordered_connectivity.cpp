@@ -1,10 +1,16 @@
 #include "shared/internal/ordered_connectivity.h"
 
 #include "shared/internal/symbol_stream.h"
+#include "shared/uninitialized_vector.h"
+
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include <absl/strings/str_cat.h>
 
 #include <algorithm>
+#include <cstring>
 #include <limits>
 #include <memory>
 
@@ -12,7 +18,7 @@ namespace isostream::internal {
 namespace {
 
 static_assert((kEdgeFifoSize & (kEdgeFifoSize - 1)) == 0, "the edge FIFO is a power-of-2 ring");
-static_assert((kVertexCacheSize & (kVertexCacheSize - 1)) == 0, "the cache is a power-of-2 ring");
+static_assert(kVertexCacheSize % 4 == 0, "the cache is searched four entries at a time");
 
 uint64_t EdgeKey(uint32_t from, uint32_t to) { return (uint64_t{from} << 32) | to; }
 
@@ -20,7 +26,10 @@ uint64_t EdgeKey(uint32_t from, uint32_t to) { return (uint64_t{from} << 32) | t
 class CoderState {
  public:
   // Vertices are numbered 0..vertex_count-1.
-  explicit CoderState(size_t vertex_count) : in_cache_(vertex_count, 0) {}
+  explicit CoderState(size_t vertex_count) : in_cache_(vertex_count, 0) {
+    // No vertex has this number (vertex_count < 2^32), so unused entries never match.
+    std::fill_n(cache_, kVertexCacheSize, 0xffffffffu);
+  }
 
   // Most recent first: k = 0 is the last edge pushed. Requires k < edge_count().
   uint64_t edge(uint32_t k) const { return edges_[(pushes_ - 1 - k) & (kEdgeFifoSize - 1)]; }
@@ -29,16 +38,27 @@ class CoderState {
   uint32_t pushes() const { return pushes_; }
 
   // Most recent first. Requires i < cache_size().
-  uint32_t cached(uint32_t i) const { return cache_[Slot(i)]; }
+  uint32_t cached(uint32_t i) const { return cache_[i]; }
   uint32_t cache_size() const { return cache_size_; }
 
-  // Position of `vertex` in the cache, or cache_size() if absent. Most lookups are of recently
-  // used vertices, near the front.
+  // Position of `vertex` in the cache, or cache_size() if absent: the per-vertex flag answers
+  // misses, and a hit compares all entries at once (they are distinct) instead of walking.
   uint32_t FindCached(uint32_t vertex) const {
     if (!in_cache_[vertex]) return cache_size_;
+#ifdef __SSE2__
+    const __m128i key = _mm_set1_epi32(static_cast<int>(vertex));
+    uint32_t hits = 0;
+    for (uint32_t i = 0; i < kVertexCacheSize; i += 4) {
+      const __m128i entries = _mm_loadu_si128(reinterpret_cast<const __m128i*>(cache_ + i));
+      const __m128i equal = _mm_cmpeq_epi32(entries, key);
+      hits |= static_cast<uint32_t>(_mm_movemask_ps(_mm_castsi128_ps(equal))) << i;
+    }
+    return hits ? static_cast<uint32_t>(__builtin_ctz(hits)) : cache_size_;
+#else
     uint32_t i = 0;
-    while (i < cache_size_ && cache_[Slot(i)] != vertex) ++i;
+    while (i < cache_size_ && cache_[i] != vertex) ++i;
     return i;
+#endif
   }
 
   // What a caller knows of a corner's cache position before the triangle is recorded.
@@ -73,31 +93,25 @@ class CoderState {
   }
 
  private:
-  // The cache is a ring: position i lives in slot front_ + i.
-  uint32_t Slot(uint32_t i) const { return (front_ + i) & (kVertexCacheSize - 1); }
-
   // Moves `vertex`, at position `from` (cache_size() if absent), to the front, dropping the
-  // least recent vertex when the cache is full.
+  // least recent vertex when the cache is full. Position i is entry i: one short memmove.
   void MoveToFront(uint32_t vertex, uint32_t from) {
     if (from == cache_size_) {
-      // New to the cache: it takes the slot before the front (the least recent one if full).
-      front_ = (front_ - 1) & (kVertexCacheSize - 1);
       if (cache_size_ == kVertexCacheSize) {
-        in_cache_[cache_[front_]] = 0;
+        from = kVertexCacheSize - 1;
+        in_cache_[cache_[from]] = 0;
       } else {
         ++cache_size_;
       }
       in_cache_[vertex] = 1;
-    } else {
-      for (uint32_t i = from; i > 0; --i) cache_[Slot(i)] = cache_[Slot(i - 1)];
     }
-    cache_[front_] = vertex;
+    std::memmove(cache_ + 1, cache_, from * sizeof(uint32_t));
+    cache_[0] = vertex;
   }
 
   uint64_t edges_[kEdgeFifoSize] = {};
   uint32_t pushes_ = 0;  // wraps only past 2^32 edges, far more than a chunk has
-  uint32_t cache_[kVertexCacheSize] = {};
-  uint32_t front_ = 0;
+  uint32_t cache_[kVertexCacheSize];  // most recent first; unused entries 0xffffffff
   uint32_t cache_size_ = 0;
   std::vector<uint8_t> in_cache_;  // per vertex: 1 while it is in cache_
 };
@@ -135,10 +149,6 @@ class EdgeIndex {
   Slot slots_[size_t{1} << kBits];
 };
 
-void AppendArray(const std::vector<uint32_t>& symbols, std::string* out) {
-  if (!symbols.empty()) AppendSymbols(symbols.data(), symbols.size(), out);
-}
-
 bool ReadArray(const char* data, size_t size, size_t* at, size_t count,
                std::vector<uint32_t>* symbols) {
   symbols->resize(count);
@@ -153,39 +163,35 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
       vertex_count > std::numeric_limits<uint32_t>::max()) {
     return absl::InvalidArgumentError("too many triangles or vertices for one chunk");
   }
-  std::vector<uint32_t> triangle_symbols(triangle_count);
-  std::vector<uint32_t> corner_symbols;
-  std::vector<uint32_t> explicit_values;
-  corner_symbols.reserve(triangle_count + vertex_count);
+  // Written once each, at most one corner symbol and one explicit value per corner.
+  UninitializedVector<uint32_t> triangle_symbols(triangle_count);
+  UninitializedVector<uint32_t> corner_symbols(3 * triangle_count);
+  UninitializedVector<uint32_t> explicit_values(3 * triangle_count);
+  size_t corners = 0, explicits = 0;
   CoderState state(vertex_count);
   auto index = std::make_unique<EdgeIndex>();
   auto record = [&index](uint64_t key, uint32_t push) { index->Record(key, push); };
   uint32_t next = 0;  // the number a new vertex gets
 
-  auto code_corner = [&](uint32_t vertex, uint32_t* at) -> absl::Status {
+  // Codes one corner; false if `vertex` breaks first-use order or the vertex count.
+  auto code_corner = [&](uint32_t vertex, uint32_t* at) -> bool {
     if (vertex == next) {
       *at = CoderState::kAbsent;
-      if (next == vertex_count) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("vertex index ", vertex, " is not below the vertex count"));
-      }
+      if (next == vertex_count) return false;
       ++next;
-      corner_symbols.push_back(0);
-      return absl::OkStatus();
+      corner_symbols[corners++] = 0;
+      return true;
     }
-    if (vertex > next) {
-      return absl::InvalidArgumentError(absl::StrCat("vertex ", vertex, " is used before vertex ",
-                                                     next, ": not in first-use order"));
-    }
+    if (vertex > next) return false;
     *at = state.FindCached(vertex);
     if (*at < state.cache_size()) {
-      corner_symbols.push_back(1 + *at);
+      corner_symbols[corners++] = 1 + *at;
     } else {
       *at = CoderState::kAbsent;
-      corner_symbols.push_back(kExplicitCorner);
-      explicit_values.push_back(next - 1 - vertex);
+      corner_symbols[corners++] = kExplicitCorner;
+      explicit_values[explicits++] = next - 1 - vertex;
     }
-    return absl::OkStatus();
+    return true;
   };
 
   for (size_t t = 0; t < triangle_count; ++t) {
@@ -198,11 +204,17 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
     }
     triangle_symbols[t] = symbol;
     uint32_t at[3] = {CoderState::kUnknown, CoderState::kUnknown, CoderState::kUnknown};
+    bool ok = true;
     if (symbol == kNoEdge) {
-      for (int r = 0; r < 3; ++r) ISOSTREAM_RETURN_IF_ERROR(code_corner(x[r], &at[r]));
+      ok = code_corner(x[0], &at[0]) && code_corner(x[1], &at[1]) && code_corner(x[2], &at[2]);
     } else {
       const int r = (symbol % 3 + 2) % 3;
-      ISOSTREAM_RETURN_IF_ERROR(code_corner(x[r], &at[r]));
+      ok = code_corner(x[r], &at[r]);
+    }
+    if (!ok) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("triangle ", t, " uses a vertex that is not the next new one (", next,
+                       ") nor an earlier one, or is not below the vertex count ", vertex_count));
     }
     state.Add(x, at, record);
   }
@@ -210,9 +222,9 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
     return absl::InvalidArgumentError(
         absl::StrCat("the triangles use ", next, " of ", vertex_count, " vertices"));
   }
-  AppendArray(triangle_symbols, out);
-  AppendArray(corner_symbols, out);
-  AppendArray(explicit_values, out);
+  if (triangle_count > 0) AppendSymbols(triangle_symbols.data(), triangle_count, out);
+  if (corners > 0) AppendSymbols(corner_symbols.data(), corners, out);
+  if (explicits > 0) AppendSymbols(explicit_values.data(), explicits, out);
   return absl::OkStatus();
 }
 
