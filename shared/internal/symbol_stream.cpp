@@ -4,6 +4,8 @@
 #include <cstring>
 #include <vector>
 
+#include "shared/uninitialized_vector.h"
+
 namespace isostream::internal {
 namespace {
 
@@ -89,26 +91,33 @@ struct EncodeSymbol {
   uint32_t renorm_limit;  // the state must be below this before the symbol is pushed
 };
 
+// Writes into a buffer sized beforehand for the worst case (29 bits a value), four bytes at a
+// time, so the hot loop has no capacity checks.
 class BitWriter {
  public:
-  explicit BitWriter(std::string* out) : out_(out) {}
-  void Put(uint32_t value, uint32_t bits) {
+  explicit BitWriter(uint8_t* out) : p_(out) {}
+  void Put(uint32_t value, uint32_t bits) {  // bits <= 29
     acc_ |= uint64_t{value} << count_;
     count_ += bits;
-    while (count_ >= 8) {
-      out_->push_back(static_cast<char>(acc_));
-      acc_ >>= 8;
-      count_ -= 8;
+    if (count_ >= 32) {
+      const uint32_t word = static_cast<uint32_t>(acc_);
+      std::memcpy(p_, &word, 4);  // little-endian host (frame_codec.cpp asserts it)
+      p_ += 4;
+      acc_ >>= 32;
+      count_ -= 32;
     }
   }
-  void Flush() {
-    if (count_ > 0) out_->push_back(static_cast<char>(acc_));
-    acc_ = 0;
-    count_ = 0;
+  // Writes the bits still held, the last byte zero-padded; returns the end of the data.
+  uint8_t* Finish() {
+    for (; count_ > 0; count_ = count_ > 8 ? count_ - 8 : 0) {
+      *p_++ = static_cast<uint8_t>(acc_);
+      acc_ >>= 8;
+    }
+    return p_;
   }
 
  private:
-  std::string* out_;
+  uint8_t* p_;
   uint64_t acc_ = 0;
   uint32_t count_ = 0;
 };
@@ -141,23 +150,25 @@ class BitReader {
 }  // namespace
 
 void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
-  std::vector<uint8_t> tokens(count);
-  uint32_t counts[kMaxTokens] = {};
-  uint32_t alphabet = 1;
-  std::string extra;
-  extra.reserve(count / 2);
-  BitWriter extra_bits(&extra);
+  UninitializedVector<uint8_t> tokens(count);
+  UninitializedVector<uint8_t> extra(4 * count + 8);
+  BitWriter extra_bits(extra.data());
+  // Four histograms: a run of one token would otherwise wait on its own count's last update.
+  uint32_t counts[4][kMaxTokens] = {};
+  uint32_t largest_token = 0;
   for (size_t i = 0; i < count; ++i) {
     const Token t = Tokenize(symbols[i]);
     tokens[i] = static_cast<uint8_t>(t.token);
-    ++counts[t.token];
-    alphabet = std::max(alphabet, t.token + 1);
+    ++counts[i & 3][t.token];
+    largest_token = std::max(largest_token, t.token);
     if (t.extra_bits) extra_bits.Put(t.extra, t.extra_bits);
   }
-  extra_bits.Flush();
+  const size_t extra_size = static_cast<size_t>(extra_bits.Finish() - extra.data());
+  const uint32_t alphabet = largest_token + 1;
+  for (uint32_t t = 0; t < alphabet; ++t) counts[0][t] += counts[1][t] + counts[2][t] + counts[3][t];
 
-  uint32_t freq[kMaxTokens];
-  Normalize(counts, alphabet, count, freq);
+  uint32_t freq[kMaxTokens] = {};
+  Normalize(counts[0], alphabet, count, freq);
   PutVarint(alphabet, out);
   EncodeSymbol table[kMaxTokens];
   uint32_t start = 0;
@@ -174,27 +185,40 @@ void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
     e.renorm_limit = ((kLow >> kProbabilityBits) << 8) * e.freq;
   }
 
-  // rANS codes last symbol first, so the stream is written back to front. A symbol emits at
-  // most two bytes (the state is below 2^31 and shrinks below 2^19 freq before the push).
-  std::vector<uint8_t> stream(2 * count + 4);
+  // rANS codes last symbol first, so the stream is written back to front. Two states take
+  // alternate symbols (symbol i state i % 2), so consecutive pushes do not wait on each other.
+  // A symbol emits at most two bytes (the state is below 2^31 and shrinks below 2^19 freq
+  // before the push).
+  UninitializedVector<uint8_t> stream(2 * count + 8);
   uint8_t* end = stream.data() + stream.size();
   uint8_t* p = end;
-  uint32_t x = kLow;
-  for (size_t i = count; i-- > 0;) {
-    const EncodeSymbol& e = table[tokens[i]];
-    while (x >= e.renorm_limit) {
-      *--p = static_cast<uint8_t>(x);
-      x >>= 8;
+  uint32_t x[2] = {kLow, kLow};
+  auto push = [&p, &table](uint32_t& state, uint8_t token) {
+    const EncodeSymbol& e = table[token];
+    while (state >= e.renorm_limit) {
+      *--p = static_cast<uint8_t>(state);
+      state >>= 8;
     }
-    const uint32_t q = static_cast<uint32_t>((x * e.multiplier) >> e.shift);
-    x = (q << kProbabilityBits) + (x - q * e.freq) + e.start;
+    const uint32_t q = static_cast<uint32_t>((state * e.multiplier) >> e.shift);
+    state = (q << kProbabilityBits) + (state - q * e.freq) + e.start;
+  };
+  size_t i = count;
+  if (i % 2 == 1) {
+    --i;
+    push(x[0], tokens[i]);
   }
-  p -= 4;
-  std::memcpy(p, &x, 4);  // little-endian host (frame_codec.cpp asserts it)
+  while (i > 0) {
+    i -= 2;
+    push(x[1], tokens[i + 1]);
+    push(x[0], tokens[i]);
+  }
+  p -= 8;
+  std::memcpy(p, &x[0], 4);
+  std::memcpy(p + 4, &x[1], 4);
   PutVarint(static_cast<uint32_t>(end - p), out);
   out->append(reinterpret_cast<const char*>(p), static_cast<size_t>(end - p));
-  PutVarint(static_cast<uint32_t>(extra.size()), out);
-  out->append(extra);
+  PutVarint(static_cast<uint32_t>(extra_size), out);
+  out->append(reinterpret_cast<const char*>(extra.data()), extra_size);
 }
 
 bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32_t* symbols) {
@@ -218,7 +242,7 @@ bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32
   }
 
   uint32_t rans_size = 0, extra_size = 0;
-  if (!GetVarint(bytes, size, at, &rans_size) || rans_size < 4 || rans_size > size - *at) {
+  if (!GetVarint(bytes, size, at, &rans_size) || rans_size < 8 || rans_size > size - *at) {
     return false;
   }
   const uint8_t* p = bytes + *at;
@@ -228,17 +252,21 @@ bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32
   BitReader extra_bits(bytes + *at, extra_size);
   *at += extra_size;
 
-  uint32_t x;
-  std::memcpy(&x, p, 4);
-  p += 4;
-  if (x < kLow || x >= (kLow << 8)) return false;
+  uint32_t x[2];
+  std::memcpy(&x[0], p, 4);
+  std::memcpy(&x[1], p + 4, 4);
+  p += 8;
+  for (uint32_t state : x) {
+    if (state < kLow || state >= (kLow << 8)) return false;
+  }
   for (size_t i = 0; i < count; ++i) {
-    const uint32_t slot = x & (kTotal - 1);
+    uint32_t& state = x[i & 1];
+    const uint32_t slot = state & (kTotal - 1);
     const uint32_t t = slot_token[slot];
-    x = freq[t] * (x >> kProbabilityBits) + slot - start[t];
-    while (x < kLow) {
+    state = freq[t] * (state >> kProbabilityBits) + slot - start[t];
+    while (state < kLow) {
       if (p == rans_end) return false;
-      x = (x << 8) | *p++;
+      state = (state << 8) | *p++;
     }
     if (t < kDirectTokens) {
       symbols[i] = t;
@@ -250,7 +278,7 @@ bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32
       symbols[i] = ((4 + ((t - kDirectTokens) & 3)) << bits) | low;
     }
   }
-  return x == kLow && p == rans_end && extra_bits.AtEnd();
+  return x[0] == kLow && x[1] == kLow && p == rans_end && extra_bits.AtEnd();
 }
 
 }  // namespace isostream::internal
