@@ -2,6 +2,7 @@
 
 #include <absl/strings/str_cat.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -40,16 +41,17 @@ float SignNotZero(float v) { return v < 0.0f ? -1.0f : 1.0f; }
 
 // Unit (or zero-free) normal -> octahedral grid coordinates in [0, 2c].
 void OctahedralEncode(const float* n, float c, uint32_t* s, uint32_t* t) {
-  const float l1 = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
-  float u = n[0] / l1, v = n[1] / l1;
+  const float inverse_l1 = 1.0f / (std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]));
+  float u = n[0] * inverse_l1, v = n[1] * inverse_l1;
   if (n[2] < 0.0f) {
     const float fu = (1.0f - std::fabs(v)) * SignNotZero(u);
     const float fv = (1.0f - std::fabs(u)) * SignNotZero(v);
     u = fu;
     v = fv;
   }
-  *s = static_cast<uint32_t>(std::lround(u * c) + static_cast<long>(c));
-  *t = static_cast<uint32_t>(std::lround(v * c) + static_cast<long>(c));
+  // Round to nearest: c (1 + u) + 0.5 is positive, so truncation is floor (no libm call).
+  *s = std::min(static_cast<uint32_t>((u + 1.0f) * c + 0.5f), 2 * static_cast<uint32_t>(c));
+  *t = std::min(static_cast<uint32_t>((v + 1.0f) * c + 0.5f), 2 * static_cast<uint32_t>(c));
 }
 
 void OctahedralDecode(uint32_t s, uint32_t t, float c, float* n) {
@@ -92,9 +94,12 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
 
   Put<uint8_t>(out, static_cast<uint8_t>(position_bits));
   Put<uint8_t>(out, static_cast<uint8_t>(normal_bits));
-  const QuantizationBox own_box = BoundingCube(chunk.positions.data(), vertex_count);
+  QuantizationBox own_box;
   if (position_bits > 0) {
-    if (box == nullptr) box = &own_box;
+    if (box == nullptr) {
+      own_box = BoundingCube(chunk.positions.data(), vertex_count);
+      box = &own_box;
+    }
     for (int k = 0; k < 3; ++k) Put<float>(out, box->origin[k]);
     Put<float>(out, box->range);
   }
@@ -113,11 +118,12 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
     uint32_t previous[3] = {0, 0, 0};
     for (size_t v = 0; v < vertex_count; ++v) {
       for (int k = 0; k < 3; ++k) {
-        const float offset = (chunk.positions[3 * v + k] - box->origin[k]) * scale;
-        const float rounded = std::floor(offset + 0.5f);
-        const uint32_t q = rounded <= 0.0f                           ? 0
-                           : rounded >= static_cast<float>(max_q) ? max_q
-                                                                    : static_cast<uint32_t>(rounded);
+        // Draco's floor(offset + 0.5); the offset is >= 0 inside the box, where truncation is
+        // floor and costs no libm call. The clamps only guard float rounding at the edges.
+        const float offset = (chunk.positions[3 * v + k] - box->origin[k]) * scale + 0.5f;
+        const uint32_t q = !(offset > 0.0f)                         ? 0
+                           : offset >= static_cast<float>(max_q) ? max_q
+                                                                  : static_cast<uint32_t>(offset);
         symbols[3 * v + k] = ZigZag(WrappedDelta(q, previous[k], modulus));
         previous[k] = q;
       }
