@@ -24,10 +24,10 @@ uint64_t SplitKey(uint32_t vertex, uint8_t surface) { return (uint64_t{vertex} <
 class LocalIndexMap {
  public:
   LocalIndexMap(size_t mesh_vertex_count, size_t corner_count) {
-    dense_ = mesh_vertex_count <= 4 * corner_count;
+    // Local indices are below the corner count, kept below 2^28 here: 4 bits for the surface.
+    dense_ = mesh_vertex_count <= 4 * corner_count && corner_count < (size_t{1} << 28);
     if (dense_) {
-      local_.assign(mesh_vertex_count, kUnset);
-      surface_of_.resize(mesh_vertex_count);
+      entry_.assign(mesh_vertex_count, kUnset);
     } else {
       split_.reserve(corner_count);
     }
@@ -36,20 +36,21 @@ class LocalIndexMap {
   // Returns the local index of (vertex, surface), giving it `next` if it has none yet.
   uint32_t FindOrAdd(uint32_t vertex, uint8_t surface, uint32_t next) {
     if (dense_) {
-      if (local_[vertex] == kUnset) {
-        local_[vertex] = next;
-        surface_of_[vertex] = surface;
+      // Local index and surface share one word: one memory access per lookup.
+      uint32_t& entry = entry_[vertex];
+      if (entry == kUnset) {
+        entry = (next << 4) | surface;
         return next;
       }
-      if (surface_of_[vertex] == surface) return local_[vertex];
+      if ((entry & 15) == surface) return entry >> 4;
     }
     return split_.try_emplace(SplitKey(vertex, surface), next).first->second;
   }
 
  private:
+  static_assert(kMaxSurfaces <= 16, "the dense table keeps the surface in 4 bits");
   bool dense_ = false;
-  std::vector<uint32_t> local_;
-  std::vector<uint8_t> surface_of_;
+  std::vector<uint32_t> entry_;  // per mesh vertex: local << 4 | surface, or kUnset
   absl::flat_hash_map<uint64_t, uint32_t> split_;
 };
 
