@@ -2,21 +2,24 @@
 // (connectivity and vertex attributes), isostream's own: a static rANS coder with byte-wise
 // renormalization over a small token alphabet, plus raw extra bits for large values.
 //
-// A symbol v (uint32) becomes a token and 0-29 extra bits: v < 16 is token v with no extra
-// bits; otherwise, with b = bit width of v (5..32), token 16 + 4 (b - 5) + the two bits below
-// v's leading one, and the b - 3 bits below those as extra bits. Tokens are at most 127.
+// A symbol v (uint32) becomes a token and 0-29 extra bits: v < 128 is token v with no extra
+// bits (the connectivity and cache symbols, small deltas: their exact distribution matters);
+// otherwise, with b = bit width of v (8..32), token 128 + 4 (b - 8) + the two bits below v's
+// leading one, and the b - 3 bits below those as extra bits. Tokens are at most 227.
 // Most symbols here are small (cache positions, deltas of neighbouring vertices), so the
 // tokens carry nearly all the information and the extra bits are close to uniform.
 //
 // One array, exactly:
-//   varint   A, the token alphabet size (largest token + 1), 1..128
+//   varint   A, the token alphabet size (largest token + 1), 1..228
 //   varint   A frequencies, each 0..4096, summing to 4096 (kProbabilityBits = 12)
-//   varint   R, then R bytes: the rANS stream (the final state, 4 bytes little-endian, first)
+//   varint   R >= 8, then R bytes: the rANS stream: two interleaved states (symbol i uses
+//            state i % 2), their final values first (4 bytes little-endian each, even
+//            symbols' state first), then the renormalization bytes
 //   varint   E, then E bytes: the extra bits, least significant first, symbol order, the last
 //            byte zero-padded
 // Varints are LEB128 (7 bits a byte, low first, at most 5 bytes). The decoder checks every
-// field, refuses to read past either stream, requires the rANS state to end where the encoder
-// started it and both streams to be consumed exactly.
+// field, refuses to read past either stream, and requires both rANS states to end where the
+// encoder started them and both streams to be consumed exactly.
 #pragma once
 
 #include <cstddef>

@@ -19,6 +19,7 @@
 
 #include "mesh_test_meshes.h"
 #include "shared/frame_codec.h"
+#include "shared/internal/symbol_stream.h"
 #include "shared/mesh_validate.h"
 
 namespace isostream {
@@ -679,6 +680,89 @@ TEST_F(MalformedChunks, EdgeCachePointCloudSizeFieldIsChecked) {
     std::memcpy(edited.data() + kChunkHeaderSize, &edited_size, 4);
     Reseal(&edited);
     EXPECT_EQ(TryDecode(edited).code(), absl::StatusCode::kDataLoss) << edited_size;
+  }
+}
+
+TEST_F(MalformedChunks, EdgeCacheVertexPartFieldsAreChecked) {
+  // The vertex part starts with position bits, normal bits, the box origin and range.
+  const std::string& chunk = chunks_[0];
+  ASSERT_EQ(ReadChunkHeader(chunk.data(), chunk.size())->codec, ChunkCodec::kDracoEdgeCache);
+  const size_t part = kChunkHeaderSize + 4;
+  auto edited = [&](size_t at, const void* value, size_t bytes) {
+    std::string e = chunk;
+    std::memcpy(e.data() + at, value, bytes);
+    Reseal(&e);
+    return e;
+  };
+  // Widths outside the format's range. (Another valid width may decode, to wrong values, as
+  // any edit of attribute bytes can.)
+  for (uint8_t bits : {31, 32, 255}) {
+    EXPECT_EQ(TryDecode(edited(part, &bits, 1)).code(), absl::StatusCode::kDataLoss) << int{bits};
+  }
+  for (uint8_t bits : {1, 31, 255}) {
+    EXPECT_EQ(TryDecode(edited(part + 1, &bits, 1)).code(), absl::StatusCode::kDataLoss)
+        << int{bits};
+  }
+  const float bad_ranges[] = {0.0f, -1.0f, INFINITY, NAN};
+  for (float range : bad_ranges) {
+    EXPECT_EQ(TryDecode(edited(part + 14, &range, 4)).code(), absl::StatusCode::kDataLoss)
+        << range;
+  }
+  const float bad_origin = INFINITY;
+  EXPECT_EQ(TryDecode(edited(part + 2, &bad_origin, 4)).code(), absl::StatusCode::kDataLoss);
+  // A chunk without normals must not carry normal bits or undefined-normal tags.
+  OrderedMesh bare = mesh_;
+  bare.normals.clear();
+  const std::string no_normals = Encode(bare, 0, bare.triangle_count());
+  std::string e = no_normals;
+  e[part + 1] = 10;
+  Reseal(&e);
+  OrderedMesh out;
+  EXPECT_EQ(DecodeAnyChunk(e.data(), e.size(), &out).code(), absl::StatusCode::kDataLoss);
+  EXPECT_TRUE(out.empty());
+}
+
+TEST(SymbolStream, RoundTripsAndRejectsEveryTruncationAndExtension) {
+  std::mt19937 rng(31);
+  std::geometric_distribution<uint32_t> small(0.3);
+  std::uniform_int_distribution<uint32_t> any;
+  for (int trial = 0; trial < 40; ++trial) {
+    const size_t count = 1 + rng() % 3000;
+    std::vector<uint32_t> symbols(count);
+    for (uint32_t& v : symbols) {
+      switch (trial % 4) {
+        case 0: v = small(rng); break;                    // skewed, direct tokens
+        case 1: v = any(rng) >> (rng() % 32); break;      // every bit width
+        case 2: v = 7; break;                             // a single token
+        default: v = rng() % 2 ? small(rng) : any(rng);  // mixed
+      }
+    }
+    std::string stream = "prefix";
+    internal::AppendSymbols(symbols.data(), count, &stream);
+    std::vector<uint32_t> decoded(count);
+    size_t at = 6;
+    ASSERT_TRUE(internal::ReadSymbols(stream.data(), stream.size(), &at, count, decoded.data()));
+    EXPECT_EQ(at, stream.size());
+    EXPECT_EQ(decoded, symbols);
+    // Fewer bytes never decode, nor do more symbols than were written.
+    for (size_t size = 6; size < stream.size(); size += 1 + size / 16) {
+      at = 6;
+      EXPECT_FALSE(internal::ReadSymbols(stream.data(), size, &at, count, decoded.data()));
+    }
+    // (A one-token array carries no information per symbol: any count decodes from it.)
+    at = 6;
+    std::vector<uint32_t> more(count + 1);
+    if (trial % 4 != 2) {
+      EXPECT_FALSE(
+          internal::ReadSymbols(stream.data(), stream.size(), &at, count + 1, more.data()));
+    }
+    // Edited bytes must never read out of bounds (checked under sanitizers), and mostly fail.
+    for (int edit = 0; edit < 50; ++edit) {
+      std::string e = stream;
+      e[6 + rng() % (e.size() - 6)] = static_cast<char>(rng());
+      at = 6;
+      internal::ReadSymbols(e.data(), e.size(), &at, count, decoded.data());
+    }
   }
 }
 
