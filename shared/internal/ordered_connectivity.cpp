@@ -28,8 +28,10 @@ class CoderState {
   // Vertices are numbered 0..vertex_count-1.
   explicit CoderState(size_t vertex_count) : in_cache_(vertex_count, 0) {
     // No vertex has this number (vertex_count < 2^32), so unused entries never match.
-    std::fill_n(cache_, kVertexCacheSize, 0xffffffffu);
+    std::fill_n(window_, kWindowSpace, 0xffffffffu);
   }
+  CoderState(const CoderState&) = delete;  // cache_ points into window_
+  CoderState& operator=(const CoderState&) = delete;
 
   // Most recent first: k = 0 is the last edge pushed. Requires k < edge_count().
   uint64_t edge(uint32_t k) const { return edges_[(pushes_ - 1 - k) & (kEdgeFifoSize - 1)]; }
@@ -47,8 +49,15 @@ class CoderState {
     if (!in_cache_[vertex]) return cache_size_;
 #ifdef __SSE2__
     const __m128i key = _mm_set1_epi32(static_cast<int>(vertex));
+    // Most hits are among the first eight entries: look there first.
     uint32_t hits = 0;
-    for (uint32_t i = 0; i < kVertexCacheSize; i += 4) {
+    for (uint32_t i = 0; i < 8; i += 4) {
+      const __m128i entries = _mm_loadu_si128(reinterpret_cast<const __m128i*>(cache_ + i));
+      const __m128i equal = _mm_cmpeq_epi32(entries, key);
+      hits |= static_cast<uint32_t>(_mm_movemask_ps(_mm_castsi128_ps(equal))) << i;
+    }
+    if (hits) return static_cast<uint32_t>(__builtin_ctz(hits));
+    for (uint32_t i = 8; i < kVertexCacheSize; i += 4) {
       const __m128i entries = _mm_loadu_si128(reinterpret_cast<const __m128i*>(cache_ + i));
       const __m128i equal = _mm_cmpeq_epi32(entries, key);
       hits |= static_cast<uint32_t>(_mm_movemask_ps(_mm_castsi128_ps(equal))) << i;
@@ -97,13 +106,21 @@ class CoderState {
   // least recent vertex when the cache is full: entries 0..from-1 move up by one.
   void MoveToFront(uint32_t vertex, uint32_t from) {
     if (from == cache_size_) {
+      // New to the cache, about one corner in six: the cache slides down one entry in window_
+      // instead of every entry moving up, and the least recent one falls off its end.
       if (cache_size_ == kVertexCacheSize) {
-        from = kVertexCacheSize - 1;
-        in_cache_[cache_[from]] = 0;
+        in_cache_[cache_[kVertexCacheSize - 1]] = 0;
       } else {
         ++cache_size_;
       }
       in_cache_[vertex] = 1;
+      if (cache_ == window_) {  // at the bottom of window_: move back to the top
+        std::memmove(window_ + kWindowSpace - kVertexCacheSize, window_,
+                     kVertexCacheSize * sizeof(uint32_t));
+        cache_ = window_ + kWindowSpace - kVertexCacheSize;
+      }
+      *--cache_ = vertex;
+      return;
     }
 #ifdef __SSE2__
     // Four entries at a time, only as far as `from`: a lane takes its left neighbour (the
@@ -131,7 +148,11 @@ class CoderState {
 
   uint64_t edges_[kEdgeFifoSize] = {};
   uint32_t pushes_ = 0;  // wraps only past 2^32 edges, far more than a chunk has
-  uint32_t cache_[kVertexCacheSize];  // most recent first; unused entries 0xffffffff
+  static constexpr uint32_t kWindowSpace = 8 * kVertexCacheSize;
+  // The cache is the kVertexCacheSize entries from cache_, most recent first, unused ones
+  // 0xffffffff; cache_ slides down through window_ as new vertices arrive.
+  uint32_t window_[kWindowSpace];
+  uint32_t* cache_ = window_ + kWindowSpace - kVertexCacheSize;
   uint32_t cache_size_ = 0;
   std::vector<uint8_t> in_cache_;  // per vertex: 1 while it is in cache_
 };
