@@ -80,7 +80,9 @@ absl::Status EncodeDracoChunk(const internal::GatheredChunk& chunk, const CodecO
   if (triangle_count == 0) {
     return SealChunk(ChunkCodec::kDraco, false, 0, 0, out);
   }
-  if (options.position_box && options.position_bits > 0) {
+  // Codec 3's vertex coder checks the box while it quantizes.
+  if (options.position_box && options.position_bits > 0 &&
+      options.connectivity != CodecOptions::Connectivity::kEdgeCache) {
     ISOSTREAM_RETURN_IF_ERROR(internal::CheckInsideBox(chunk, *options.position_box));
   }
 

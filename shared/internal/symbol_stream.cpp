@@ -195,9 +195,14 @@ void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
   uint32_t x[2] = {kLow, kLow};
   auto push = [&p, &table](uint32_t& state, uint8_t token) {
     const EncodeSymbol& e = table[token];
-    while (state >= e.renorm_limit) {
-      *--p = static_cast<uint8_t>(state);
-      state >>= 8;
+    // Zero, one or two bytes, without branches: whether a byte goes out depends on the data
+    // and would be mispredicted about every other symbol. The byte below p is always written
+    // (the 8 bytes kept for the final states leave room) and kept only if p moves.
+    for (int byte = 0; byte < 2; ++byte) {
+      const uint32_t emit = state >= e.renorm_limit;
+      p[-1] = static_cast<uint8_t>(state);
+      p -= emit;
+      state >>= 8 * emit;
     }
     const uint32_t q = static_cast<uint32_t>((state * e.multiplier) >> e.shift);
     state = (q << kProbabilityBits) + (state - q * e.freq) + e.start;

@@ -95,6 +95,7 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
   Put<uint8_t>(out, static_cast<uint8_t>(position_bits));
   Put<uint8_t>(out, static_cast<uint8_t>(normal_bits));
   QuantizationBox own_box;
+  const bool check_box = box != nullptr;
   if (position_bits > 0) {
     if (box == nullptr) {
       own_box = BoundingCube(chunk.positions.data(), vertex_count);
@@ -120,7 +121,15 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
       for (int k = 0; k < 3; ++k) {
         // Draco's floor(offset + 0.5); the offset is >= 0 inside the box, where truncation is
         // floor and costs no libm call. The clamps only guard float rounding at the edges.
-        const float offset = (chunk.positions[3 * v + k] - box->origin[k]) * scale + 0.5f;
+        const float inside = chunk.positions[3 * v + k] - box->origin[k];
+        if (check_box && !(inside >= 0.0f && inside <= box->range)) {
+          // CheckInsideBox's test and message, done here to save a pass over the positions.
+          return absl::InvalidArgumentError(absl::StrCat(
+              "chunk vertex ", v, " coordinate ", k, " = ", chunk.positions[3 * v + k],
+              " lies outside position_box [", box->origin[k], ", ",
+              box->origin[k] + box->range, "]"));
+        }
+        const float offset = inside * scale + 0.5f;
         const uint32_t q = !(offset > 0.0f)                         ? 0
                            : offset >= static_cast<float>(max_q) ? max_q
                                                                   : static_cast<uint32_t>(offset);

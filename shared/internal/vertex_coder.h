@@ -38,7 +38,9 @@
 namespace isostream::internal {
 
 // Appends the coded attributes of `chunk`'s vertices (at least one) to `out`. Bits as in
-// CodecOptions, already range-checked; `box` null quantizes on the chunk's BoundingCube.
+// CodecOptions, already range-checked; `box` null quantizes on the chunk's BoundingCube. With
+// a `box` and position_bits > 0, InvalidArgument (as CheckInsideBox) for a position outside
+// it; `out` is then unspecified.
 absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, int normal_bits,
                                  const QuantizationBox* box, std::string* out);
 
