@@ -105,12 +105,24 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
     Put<float>(out, box->range);
   }
 
+  // Tags in runs: neighbouring vertices nearly always share a surface, so a run costs two
+  // symbols where a symbol per vertex would cost rANS work for almost no information.
+  uint32_t* run_lengths = symbols.data();
+  uint32_t* run_tags = symbols.data() + vertex_count;  // runs <= vertex_count
+  uint32_t runs = 0;
   uint8_t previous_tag = 0;
-  for (size_t v = 0; v < vertex_count; ++v) {
-    symbols[v] = ZigZag(static_cast<int8_t>(static_cast<uint8_t>(tags[v] - previous_tag)));
+  for (size_t v = 0; v < vertex_count;) {
+    size_t end = v + 1;
+    while (end < vertex_count && tags[end] == tags[v]) ++end;
+    run_lengths[runs] = static_cast<uint32_t>(end - v - 1);
+    run_tags[runs] = ZigZag(static_cast<int8_t>(static_cast<uint8_t>(tags[v] - previous_tag)));
     previous_tag = tags[v];
+    ++runs;
+    v = end;
   }
-  AppendSymbols(symbols.data(), vertex_count, out);
+  Put<uint32_t>(out, runs);
+  AppendSymbols(run_lengths, runs, out);
+  AppendSymbols(run_tags, runs, out);
 
   if (position_bits > 0) {
     const uint32_t max_q = (uint32_t{1} << position_bits) - 1;
@@ -199,18 +211,35 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
 
   std::vector<uint32_t> symbols(3 * size_t{vertex_count});
 
-  out->tags.resize(vertex_count);
-  if (!ReadSymbols(data, size, &at, vertex_count, symbols.data())) {
+  uint32_t runs = 0;
+  if (size - at < 4) return absl::DataLossError("vertex part ends inside its tag run count");
+  std::memcpy(&runs, data + at, 4);
+  at += 4;
+  if (runs == 0 || runs > vertex_count) {
+    return absl::DataLossError(
+        absl::StrCat("vertex part: ", runs, " tag runs for ", vertex_count, " vertices"));
+  }
+  uint32_t* run_lengths = symbols.data();
+  uint32_t* run_tags = symbols.data() + vertex_count;
+  if (!ReadSymbols(data, size, &at, runs, run_lengths) ||
+      !ReadSymbols(data, size, &at, runs, run_tags)) {
     return absl::DataLossError("vertex part: tags do not decode");
   }
+  out->tags.resize(vertex_count);
   uint8_t tag = 0;
-  uint32_t defined_normals = 0;
-  for (uint32_t v = 0; v < vertex_count; ++v) {
-    if (symbols[v] > 255) return absl::DataLossError("vertex part: tag symbol out of range");
-    tag = static_cast<uint8_t>(tag + UnZigZag(symbols[v]));
-    out->tags[v] = tag;
-    defined_normals += !(tag & kUndefinedNormalBit);
+  uint32_t filled = 0;
+  for (uint32_t run = 0; run < runs; ++run) {
+    if (run_lengths[run] >= vertex_count - filled || run_tags[run] > 255) {
+      return absl::DataLossError("vertex part: tag run out of range");
+    }
+    tag = static_cast<uint8_t>(tag + UnZigZag(run_tags[run]));
+    const uint32_t length = run_lengths[run] + 1;
+    std::memset(out->tags.data() + filled, tag, length);
+    filled += length;
   }
+  if (filled != vertex_count) return absl::DataLossError("vertex part: tag runs do not cover every vertex");
+  uint32_t defined_normals = 0;
+  for (uint8_t t : out->tags) defined_normals += !(t & kUndefinedNormalBit);
   if (!has_normals && defined_normals != vertex_count) {
     return absl::DataLossError("vertex part: undefined normals in a chunk without normals");
   }

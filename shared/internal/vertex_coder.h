@@ -7,8 +7,9 @@
 //   uint8    position_bits (0: float32 positions)
 //   uint8    normal_bits (0: float32 normals; 0 when the chunk has no normals)
 //   float32  origin x, y, z, range    only when position_bits > 0: the quantization cube
-//   tags     V symbols: each vertex's tag (surface index | kUndefinedNormalBit) minus the
-//            previous vertex's, mod 256, zigzagged (the first vertex's previous is 0)
+//   tags     each vertex's tag (surface index | kUndefinedNormalBit) in runs of equal tags:
+//            uint32 R (1..V runs), R symbols run length - 1, R symbols the run's tag minus the
+//            previous run's, mod 256, zigzagged (the first run's previous is 0)
 //   positions  position_bits > 0: 3V symbols, per vertex and axis the quantized coordinate minus
 //            the previous vertex's, mod 2^position_bits, zigzagged (first from 0);
 //            otherwise 3V float32

@@ -710,6 +710,16 @@ TEST_F(MalformedChunks, EdgeCacheVertexPartFieldsAreChecked) {
   }
   const float bad_origin = INFINITY;
   EXPECT_EQ(TryDecode(edited(part + 2, &bad_origin, 4)).code(), absl::StatusCode::kDataLoss);
+  // Then the number of tag runs: at least one, at most one per vertex, and exactly the number
+  // of run symbols that follow.
+  uint32_t runs;
+  std::memcpy(&runs, chunk.data() + part + 18, 4);
+  const uint32_t vertices = static_cast<uint32_t>(mesh_.vertex_count());
+  for (uint32_t bad_runs : {0u, runs - 1, runs + 1, vertices + 1, 0xffffffffu}) {
+    if (bad_runs == runs) continue;
+    EXPECT_EQ(TryDecode(edited(part + 18, &bad_runs, 4)).code(), absl::StatusCode::kDataLoss)
+        << bad_runs;
+  }
   // A chunk without normals must not carry normal bits or undefined-normal tags.
   OrderedMesh bare = mesh_;
   bare.normals.clear();
