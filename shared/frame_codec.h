@@ -5,7 +5,7 @@
 // Three codecs share one 24-byte little-endian chunk header:
 //   0  'I' 'S' 'C' '1'   magic
 //   4  uint8   format version (1)
-//   5  uint8   codec: 1 raw, 2 Draco mesh, 3 Draco edge cache
+//   5  uint8   codec: 1 raw, 2 Draco mesh, 3 edge cache (kDracoEdgeCache: a historical name)
 //   6  uint16  flags: bit 0 = the chunk carries normals; other bits must be 0
 //   8  uint32  triangle count
 //   12 uint32  vertex count

@@ -668,7 +668,7 @@ TEST_F(MalformedChunks, DracoPayloadThatLosesOrderIsRejected) {
   EXPECT_NE(status.message().find("order"), absl::string_view::npos) << status;
 }
 
-TEST_F(MalformedChunks, EdgeCachePointCloudSizeFieldIsChecked) {
+TEST_F(MalformedChunks, EdgeCacheVertexPartSizeFieldIsChecked) {
   const std::string& chunk = chunks_[0];
   ASSERT_EQ(ReadChunkHeader(chunk.data(), chunk.size())->codec, ChunkCodec::kDracoEdgeCache);
   uint32_t points_size;
@@ -777,7 +777,7 @@ TEST(SymbolStream, RoundTripsAndRejectsEveryTruncationAndExtension) {
 }
 
 TEST_F(MalformedChunks, EdgeCacheConnectivityFromAnotherChunkIsRejected) {
-  // Chunk A's point cloud with chunk B's connectivity, B using more vertices, then fewer.
+  // Chunk A's vertex part with chunk B's connectivity, B using more vertices, then fewer.
   const OrderedMesh small = Shuffled(MakeSphere(1000), 12);
   const std::string chunks[2] = {Encode(small, 0, small.triangle_count()), chunks_[0]};
   for (int a = 0; a < 2; ++a) {
@@ -859,7 +859,7 @@ TEST(MeshCodecReport, BytesPerTriangleOnSphere) {
     for (const auto& [row, m] : {std::pair{"raw", &raw},
                                  {"draco sequential", &plain},
                                  {"draco sequential + compressed conn.", &packed},
-                                 {"draco points + edge cache (default)", &cached}}) {
+                                 {"edge cache (default)", &cached}}) {
       std::printf("  %-36s %6.2f B/tri  encode %6.1f ms/M  decode %6.1f ms/M\n", row,
                   m->bytes_per_triangle, m->encode_ms_per_million, m->decode_ms_per_million);
     }
