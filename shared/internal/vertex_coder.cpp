@@ -9,6 +9,7 @@
 
 #include "shared/internal/draco_mesh.h"
 #include "shared/internal/symbol_stream.h"
+#include "shared/uninitialized_vector.h"
 
 namespace isostream::internal {
 namespace {
@@ -83,8 +84,9 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
   const size_t vertex_count = chunk.vertex_count();
   const bool has_normals = !chunk.normals.empty();
   if (!has_normals) normal_bits = 0;
-  std::vector<uint32_t> symbols(3 * vertex_count);
-  std::vector<uint8_t> tags(vertex_count);
+  // Scratch written before it is read: no zeroing.
+  UninitializedVector<uint32_t> symbols(3 * vertex_count);
+  UninitializedVector<uint8_t> tags(vertex_count);
   size_t defined_normals = 0;
   for (size_t v = 0; v < vertex_count; ++v) {
     const bool undefined = has_normals && IsZero(&chunk.normals[3 * v]);
@@ -209,7 +211,7 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
     if (!(box.range > 0.0f)) return absl::DataLossError("vertex part: quantization range <= 0");
   }
 
-  std::vector<uint32_t> symbols(3 * size_t{vertex_count});
+  UninitializedVector<uint32_t> symbols(3 * size_t{vertex_count});
 
   uint32_t runs = 0;
   if (size - at < 4) return absl::DataLossError("vertex part ends inside its tag run count");
