@@ -136,8 +136,8 @@ class CoderState {
       const __m128i shifted = _mm_or_si128(_mm_slli_si128(entries, 4), carry);
       carry = _mm_srli_si128(entries, 12);
       const __m128i take = _mm_cmplt_epi32(position, limit);
-      _mm_storeu_si128(group, _mm_or_si128(_mm_and_si128(take, shifted),
-                                           _mm_andnot_si128(take, entries)));
+      _mm_storeu_si128(group,
+                       _mm_or_si128(_mm_and_si128(take, shifted), _mm_andnot_si128(take, entries)));
       position = _mm_add_epi32(position, four);
     }
 #else

@@ -16,6 +16,8 @@ constexpr uint32_t kDirectTokens = 128;
 constexpr uint32_t kMaxTokens = kDirectTokens + 4 * 25;
 // rANS state interval [kLow, 256 kLow): renormalizing by bytes keeps the state below 2^31.
 constexpr uint32_t kLow = uint32_t{1} << 23;
+// Interleaved rANS states (the encoder's unrolled loop assumes 4).
+constexpr size_t kStates = 4;
 
 // Number of bits needed to write v (0 for 0).
 uint32_t BitWidth(uint32_t v) { return v == 0 ? 0 : 32 - static_cast<uint32_t>(__builtin_clz(v)); }
@@ -30,7 +32,8 @@ Token Tokenize(uint32_t v) {
   if (v < kDirectTokens) return {v, 0, 0};
   const uint32_t width = BitWidth(v);  // 8..32
   const uint32_t bits = width - 3;
-  return {kDirectTokens + 4 * (width - 8) + ((v >> bits) & 3), bits, v & ((uint32_t{1} << bits) - 1)};
+  return {kDirectTokens + 4 * (width - 8) + ((v >> bits) & 3), bits,
+          v & ((uint32_t{1} << bits) - 1)};
 }
 
 void PutVarint(uint32_t v, std::string* out) {
@@ -165,7 +168,8 @@ void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
   }
   const size_t extra_size = static_cast<size_t>(extra_bits.Finish() - extra.data());
   const uint32_t alphabet = largest_token + 1;
-  for (uint32_t t = 0; t < alphabet; ++t) counts[0][t] += counts[1][t] + counts[2][t] + counts[3][t];
+  for (uint32_t t = 0; t < alphabet; ++t)
+    counts[0][t] += counts[1][t] + counts[2][t] + counts[3][t];
 
   uint32_t freq[kMaxTokens] = {};
   Normalize(counts[0], alphabet, count, freq);
@@ -185,19 +189,20 @@ void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
     e.renorm_limit = ((kLow >> kProbabilityBits) << 8) * e.freq;
   }
 
-  // rANS codes last symbol first, so the stream is written back to front. Two states take
-  // alternate symbols (symbol i state i % 2), so consecutive pushes do not wait on each other.
+  // rANS codes last symbol first, so the stream is written back to front. kStates states take
+  // turns (symbol i goes to state i % kStates), so consecutive pushes do not wait on each
+  // other's multiplies.
   // A symbol emits at most two bytes (the state is below 2^31 and shrinks below 2^19 freq
   // before the push).
-  UninitializedVector<uint8_t> stream(2 * count + 8);
+  UninitializedVector<uint8_t> stream(2 * count + 4 * kStates);
   uint8_t* end = stream.data() + stream.size();
   uint8_t* p = end;
-  uint32_t x[2] = {kLow, kLow};
+  uint32_t x[kStates] = {kLow, kLow, kLow, kLow};
   auto push = [&p, &table](uint32_t& state, uint8_t token) {
     const EncodeSymbol& e = table[token];
     // Zero, one or two bytes, without branches: whether a byte goes out depends on the data
     // and would be mispredicted about every other symbol. The byte below p is always written
-    // (the 8 bytes kept for the final states leave room) and kept only if p moves.
+    // (the bytes kept for the final states leave room) and kept only if p moves.
     for (int byte = 0; byte < 2; ++byte) {
       const uint32_t emit = state >= e.renorm_limit;
       p[-1] = static_cast<uint8_t>(state);
@@ -208,18 +213,19 @@ void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
     state = (q << kProbabilityBits) + (state - q * e.freq) + e.start;
   };
   size_t i = count;
-  if (i % 2 == 1) {
+  while (i % kStates != 0) {
     --i;
-    push(x[0], tokens[i]);
+    push(x[i % kStates], tokens[i]);
   }
-  while (i > 0) {
-    i -= 2;
+  while (i > 0) {  // unrolled so that the states stay in registers
+    i -= kStates;
+    push(x[3], tokens[i + 3]);
+    push(x[2], tokens[i + 2]);
     push(x[1], tokens[i + 1]);
     push(x[0], tokens[i]);
   }
-  p -= 8;
-  std::memcpy(p, &x[0], 4);
-  std::memcpy(p + 4, &x[1], 4);
+  p -= 4 * kStates;
+  std::memcpy(p, x, 4 * kStates);  // little-endian host
   PutVarint(static_cast<uint32_t>(end - p), out);
   out->append(reinterpret_cast<const char*>(p), static_cast<size_t>(end - p));
   PutVarint(static_cast<uint32_t>(extra_size), out);
@@ -247,7 +253,8 @@ bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32
   }
 
   uint32_t rans_size = 0, extra_size = 0;
-  if (!GetVarint(bytes, size, at, &rans_size) || rans_size < 8 || rans_size > size - *at) {
+  if (!GetVarint(bytes, size, at, &rans_size) || rans_size < 4 * kStates ||
+      rans_size > size - *at) {
     return false;
   }
   const uint8_t* p = bytes + *at;
@@ -257,15 +264,14 @@ bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32
   BitReader extra_bits(bytes + *at, extra_size);
   *at += extra_size;
 
-  uint32_t x[2];
-  std::memcpy(&x[0], p, 4);
-  std::memcpy(&x[1], p + 4, 4);
-  p += 8;
+  uint32_t x[kStates];
+  std::memcpy(x, p, 4 * kStates);
+  p += 4 * kStates;
   for (uint32_t state : x) {
     if (state < kLow || state >= (kLow << 8)) return false;
   }
   for (size_t i = 0; i < count; ++i) {
-    uint32_t& state = x[i & 1];
+    uint32_t& state = x[i % kStates];
     const uint32_t slot = state & (kTotal - 1);
     const uint32_t t = slot_token[slot];
     state = freq[t] * (state >> kProbabilityBits) + slot - start[t];
@@ -283,7 +289,10 @@ bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32
       symbols[i] = ((4 + ((t - kDirectTokens) & 3)) << bits) | low;
     }
   }
-  return x[0] == kLow && x[1] == kLow && p == rans_end && extra_bits.AtEnd();
+  for (uint32_t state : x) {
+    if (state != kLow) return false;
+  }
+  return p == rans_end && extra_bits.AtEnd();
 }
 
 }  // namespace isostream::internal

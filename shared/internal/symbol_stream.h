@@ -12,14 +12,14 @@
 // One array, exactly:
 //   varint   A, the token alphabet size (largest token + 1), 1..228
 //   varint   A frequencies, each 0..4096, summing to 4096 (kProbabilityBits = 12)
-//   varint   R >= 8, then R bytes: the rANS stream: two interleaved states (symbol i uses
-//            state i % 2), their final values first (4 bytes little-endian each, even
-//            symbols' state first), then the renormalization bytes
+//   varint   R >= 16, then R bytes: the rANS stream: four interleaved states (symbol i uses
+//            state i % 4), their final values first (4 bytes little-endian each, state 0
+//            first), then the renormalization bytes
 //   varint   E, then E bytes: the extra bits, least significant first, symbol order, the last
 //            byte zero-padded
 // Varints are LEB128 (7 bits a byte, low first, at most 5 bytes). The decoder checks every
-// field, refuses to read past either stream, and requires both rANS states to end where the
-// encoder started them and both streams to be consumed exactly.
+// field, refuses to read past either stream, and requires all four rANS states to end where
+// the encoder started them and both streams to be consumed exactly.
 #pragma once
 
 #include <cstddef>

@@ -14,7 +14,9 @@
 namespace isostream::internal {
 namespace {
 
-uint32_t ZigZag(int32_t v) { return (static_cast<uint32_t>(v) << 1) ^ static_cast<uint32_t>(v >> 31); }
+uint32_t ZigZag(int32_t v) {
+  return (static_cast<uint32_t>(v) << 1) ^ static_cast<uint32_t>(v >> 31);
+}
 int32_t UnZigZag(uint32_t s) { return static_cast<int32_t>(s >> 1) ^ -static_cast<int32_t>(s & 1); }
 
 // A difference taken modulo `modulus`, as the signed value nearest zero: both sides wrap, so
@@ -138,15 +140,15 @@ absl::Status EncodeChunkVertices(const GatheredChunk& chunk, int position_bits, 
         const float inside = chunk.positions[3 * v + k] - box->origin[k];
         if (check_box && !(inside >= 0.0f && inside <= box->range)) {
           // CheckInsideBox's test and message, done here to save a pass over the positions.
-          return absl::InvalidArgumentError(absl::StrCat(
-              "chunk vertex ", v, " coordinate ", k, " = ", chunk.positions[3 * v + k],
-              " lies outside position_box [", box->origin[k], ", ",
-              box->origin[k] + box->range, "]"));
+          return absl::InvalidArgumentError(
+              absl::StrCat("chunk vertex ", v, " coordinate ", k, " = ", chunk.positions[3 * v + k],
+                           " lies outside position_box [", box->origin[k], ", ",
+                           box->origin[k] + box->range, "]"));
         }
         const float offset = inside * scale + 0.5f;
-        const uint32_t q = !(offset > 0.0f)                         ? 0
+        const uint32_t q = !(offset > 0.0f)                      ? 0
                            : offset >= static_cast<float>(max_q) ? max_q
-                                                                  : static_cast<uint32_t>(offset);
+                                                                 : static_cast<uint32_t>(offset);
         symbols[3 * v + k] = ZigZag(WrappedDelta(q, previous[k], modulus));
         previous[k] = q;
       }
@@ -239,7 +241,8 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
     std::memset(out->tags.data() + filled, tag, length);
     filled += length;
   }
-  if (filled != vertex_count) return absl::DataLossError("vertex part: tag runs do not cover every vertex");
+  if (filled != vertex_count)
+    return absl::DataLossError("vertex part: tag runs do not cover every vertex");
   uint32_t defined_normals = 0;
   for (uint8_t t : out->tags) defined_normals += !(t & kUndefinedNormalBit);
   if (!has_normals && defined_normals != vertex_count) {
