@@ -16,8 +16,9 @@ constexpr uint32_t kDirectTokens = 128;
 constexpr uint32_t kMaxTokens = kDirectTokens + 4 * 25;
 // rANS state interval [kLow, 256 kLow): renormalizing by bytes keeps the state below 2^31.
 constexpr uint32_t kLow = uint32_t{1} << 23;
-// Interleaved rANS states (the encoder's unrolled loop assumes 4).
+// Interleaved rANS states.
 constexpr size_t kStates = 4;
+static_assert(kStates == 4, "AppendSymbols' unrolled loop pushes four states");
 
 // Number of bits needed to write v (0 for 0).
 uint32_t BitWidth(uint32_t v) { return v == 0 ? 0 : 32 - static_cast<uint32_t>(__builtin_clz(v)); }
@@ -85,7 +86,7 @@ void Normalize(const uint32_t* counts, uint32_t alphabet, size_t total, uint32_t
 }
 
 // Exact x / freq for x < 2^31 by one multiply: m = floor(2^(31+s) / freq) + 1 with 2^s >= freq
-// (Granlund and Montgomery's round-up method; m < 2^33, so x * m fits in 64 bits).
+// (Granlund and Montgomery's round-up method; m <= 2^32, so x * m < 2^63).
 struct EncodeSymbol {
   uint64_t multiplier;
   uint32_t shift;
@@ -189,11 +190,10 @@ void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
     e.renorm_limit = ((kLow >> kProbabilityBits) << 8) * e.freq;
   }
 
-  // rANS codes last symbol first, so the stream is written back to front. kStates states take
+  // rANS codes last symbol first, so the stream is written back to front. The states take
   // turns (symbol i goes to state i % kStates), so consecutive pushes do not wait on each
-  // other's multiplies.
-  // A symbol emits at most two bytes (the state is below 2^31 and shrinks below 2^19 freq
-  // before the push).
+  // other's multiplies. A symbol emits at most two bytes (the state is below 2^31 and shrinks
+  // below 2^19 freq before the push).
   UninitializedVector<uint8_t> stream(2 * count + 4 * kStates);
   uint8_t* end = stream.data() + stream.size();
   uint8_t* p = end;
