@@ -14,6 +14,7 @@
 #include "shared/internal/chunk_gather.h"
 #include "shared/internal/draco_mesh.h"
 #include "shared/internal/ordered_connectivity.h"
+#include "shared/internal/vertex_coder.h"
 #include "shared/mesh_validate.h"
 
 // Header fields and raw payloads are copied with memcpy of host values.
@@ -79,7 +80,9 @@ absl::Status EncodeDracoChunk(const internal::GatheredChunk& chunk, const CodecO
   if (triangle_count == 0) {
     return SealChunk(ChunkCodec::kDraco, false, 0, 0, out);
   }
-  if (options.position_box && options.position_bits > 0) {
+  // Codec 3's vertex coder checks the box while it quantizes.
+  if (options.position_box && options.position_bits > 0 &&
+      options.connectivity != CodecOptions::Connectivity::kEdgeCache) {
     ISOSTREAM_RETURN_IF_ERROR(internal::CheckInsideBox(chunk, *options.position_box));
   }
 
@@ -92,8 +95,12 @@ absl::Status EncodeDracoChunk(const internal::GatheredChunk& chunk, const CodecO
   std::string payload;
   if (options.connectivity == CodecOptions::Connectivity::kEdgeCache) {
     codec = ChunkCodec::kDracoEdgeCache;
+    // Room for a typical chunk (~3.5 bytes per triangle, 4 with 13-bit normals), so the parts
+    // are appended without the string growing and copying itself along the way.
+    payload.reserve(4 * triangle_count + 1024);
     payload.assign(4, '\0');
-    ISOSTREAM_RETURN_IF_ERROR(internal::EncodeDracoPoints(chunk, settings, &payload));
+    ISOSTREAM_RETURN_IF_ERROR(internal::EncodeChunkVertices(
+        chunk, options.position_bits, options.normal_bits, settings.position_box, &payload));
     Store<uint32_t>(payload.data(), static_cast<uint32_t>(payload.size() - 4));
     ISOSTREAM_RETURN_IF_ERROR(internal::EncodeOrderedConnectivity(
         chunk.triangles.data(), triangle_count, chunk.vertex_count(), &payload));
@@ -183,30 +190,25 @@ absl::StatusOr<ChunkHeader> CheckChunk(const char* data, size_t size) {
   return header;
 }
 
-// Codec 3: the point cloud's size, the point cloud, the connectivity.
+// Codec 3: the vertex part's size, the vertex part, the connectivity.
 absl::Status DecodeEdgeCachePayload(const ChunkHeader& header, const char* payload,
                                     OrderedMesh* append_to) {
   const size_t size = header.payload_size;
   if (size < 4) return absl::DataLossError("edge-cache payload is shorter than its size field");
-  const size_t points_size = Load<uint32_t>(payload);
-  if (points_size > size - 4) {
-    return absl::DataLossError(absl::StrCat("edge-cache payload declares a ", points_size,
-                                            "-byte point cloud in ", size - 4, " bytes"));
+  const size_t vertices_size = Load<uint32_t>(payload);
+  if (vertices_size > size - 4) {
+    return absl::DataLossError(absl::StrCat("edge-cache payload declares a ", vertices_size,
+                                            "-byte vertex part in ", size - 4, " bytes"));
   }
-  const char* points = payload + 4;
-  // Cheap checks first: the point count in Draco's header, then the connectivity.
-  uint32_t draco_points = 0;
-  ISOSTREAM_RETURN_IF_ERROR(internal::ReadDracoPointCloudCount(points, points_size, &draco_points));
-  if (draco_points != header.vertex_count) {
-    return absl::DataLossError(absl::StrCat("Draco payload holds ", draco_points,
-                                            " points; expected ", header.vertex_count));
-  }
-  std::vector<uint32_t> triangles;
-  ISOSTREAM_RETURN_IF_ERROR(
-      internal::DecodeOrderedConnectivity(points + points_size, size - 4 - points_size,
-                                          header.triangle_count, header.vertex_count, &triangles));
-  return internal::DecodeDracoPoints(points, points_size, std::move(triangles), header.vertex_count,
-                                     header.has_normals, append_to);
+  const char* vertices = payload + 4;
+  // Connectivity first: it is cheaper and checks the vertex count.
+  internal::DecodedChunk chunk;
+  ISOSTREAM_RETURN_IF_ERROR(internal::DecodeOrderedConnectivity(
+      vertices + vertices_size, size - 4 - vertices_size, header.triangle_count,
+      header.vertex_count, &chunk.triangles));
+  ISOSTREAM_RETURN_IF_ERROR(internal::DecodeChunkVertices(
+      vertices, vertices_size, header.vertex_count, header.has_normals, &chunk));
+  return internal::AppendDecodedChunk(&chunk, append_to);
 }
 
 absl::Status DecodeChecked(const ChunkHeader& header, const char* data, OrderedMesh* append_to) {

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "shared/mesh_validate.h"
@@ -23,10 +24,10 @@ uint64_t SplitKey(uint32_t vertex, uint8_t surface) { return (uint64_t{vertex} <
 class LocalIndexMap {
  public:
   LocalIndexMap(size_t mesh_vertex_count, size_t corner_count) {
-    dense_ = mesh_vertex_count <= 4 * corner_count;
+    // Local indices are below the corner count, kept below 2^28 here: 4 bits for the surface.
+    dense_ = mesh_vertex_count <= 4 * corner_count && corner_count < (size_t{1} << 28);
     if (dense_) {
-      local_.assign(mesh_vertex_count, kUnset);
-      surface_of_.resize(mesh_vertex_count);
+      entry_.assign(mesh_vertex_count, kUnset);
     } else {
       split_.reserve(corner_count);
     }
@@ -35,20 +36,21 @@ class LocalIndexMap {
   // Returns the local index of (vertex, surface), giving it `next` if it has none yet.
   uint32_t FindOrAdd(uint32_t vertex, uint8_t surface, uint32_t next) {
     if (dense_) {
-      if (local_[vertex] == kUnset) {
-        local_[vertex] = next;
-        surface_of_[vertex] = surface;
+      // Local index and surface share one word: one memory access per lookup.
+      uint32_t& entry = entry_[vertex];
+      if (entry == kUnset) {
+        entry = (next << 4) | surface;
         return next;
       }
-      if (surface_of_[vertex] == surface) return local_[vertex];
+      if ((entry & 15) == surface) return entry >> 4;
     }
     return split_.try_emplace(SplitKey(vertex, surface), next).first->second;
   }
 
  private:
+  static_assert(kMaxSurfaces <= 16, "the dense table keeps the surface in 4 bits");
   bool dense_ = false;
-  std::vector<uint32_t> local_;
-  std::vector<uint8_t> surface_of_;
+  std::vector<uint32_t> entry_;  // per mesh vertex: local << 4 | surface, or kUnset
   absl::flat_hash_map<uint64_t, uint32_t> split_;
 };
 
@@ -82,48 +84,57 @@ template <typename Map>
 absl::Status Gather(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count, Map* map,
                     GatheredChunk* out) {
   const bool has_normals = !mesh.normals.empty();
-  out->positions.clear();
-  out->normals.clear();
-  out->vertex_surface.clear();
+  // A range has at most 3 local vertices per triangle (not at most the mesh's vertex count: a
+  // vertex shared by two surfaces becomes two). Pages past the vertices actually written are
+  // never touched.
+  const size_t vertex_bound = 3 * triangle_count;
   out->triangles.resize(3 * triangle_count);
   out->surface.assign(mesh.surface.begin() + first_triangle,
                       mesh.surface.begin() + first_triangle + triangle_count);
-
-  // A range has at most 3 vertices per triangle and never more than the mesh.
-  const size_t vertex_bound = std::min(mesh.vertex_count(), 3 * triangle_count);
-  out->positions.reserve(3 * vertex_bound);
-  if (has_normals) out->normals.reserve(3 * vertex_bound);
-  out->vertex_surface.reserve(vertex_bound);
+  out->positions.resize(3 * vertex_bound);
+  out->normals.resize(has_normals ? 3 * vertex_bound : 0);
+  out->vertex_surface.resize(vertex_bound);
+  const uint32_t* corners = mesh.triangles.data() + 3 * first_triangle;
+  const float* mesh_positions = mesh.positions.data();
+  const float* mesh_normals = mesh.normals.data();
+  uint32_t* local_corners = out->triangles.data();
+  float* positions = out->positions.data();
+  float* normals = out->normals.data();
+  uint8_t* vertex_surface = out->vertex_surface.data();
 
   // Assign local indices in first-use order, copying each vertex when first seen.
+  uint32_t next = 0;
   for (size_t t = 0; t < triangle_count; ++t) {
     const uint8_t surface = out->surface[t];
     for (int c = 0; c < 3; ++c) {
-      const uint32_t vertex = mesh.triangles[3 * (first_triangle + t) + c];
-      const uint32_t next = static_cast<uint32_t>(out->vertex_surface.size());
+      const uint32_t vertex = corners[3 * t + c];
       const uint32_t local = map->FindOrAdd(vertex, surface, next);
-      out->triangles[3 * t + c] = local;
+      local_corners[3 * t + c] = local;
       if (local != next) continue;
-      const float* position = &mesh.positions[3 * size_t{vertex}];
+      const float* position = mesh_positions + 3 * size_t{vertex};
       if (!std::isfinite(position[0]) || !std::isfinite(position[1]) ||
           !std::isfinite(position[2])) {
         return absl::InvalidArgumentError(absl::StrCat("vertex ", vertex, " (used by triangle ",
                                                        first_triangle + t,
                                                        ") has a non-finite position"));
       }
-      out->positions.insert(out->positions.end(), position, position + 3);
+      std::memcpy(positions + 3 * size_t{next}, position, 3 * sizeof(float));
       if (has_normals) {
-        const float* normal = &mesh.normals[3 * size_t{vertex}];
+        const float* normal = mesh_normals + 3 * size_t{vertex};
         if (!std::isfinite(normal[0]) || !std::isfinite(normal[1]) || !std::isfinite(normal[2])) {
           return absl::InvalidArgumentError(absl::StrCat("vertex ", vertex, " (used by triangle ",
                                                          first_triangle + t,
                                                          ") has a non-finite normal"));
         }
-        out->normals.insert(out->normals.end(), normal, normal + 3);
+        std::memcpy(normals + 3 * size_t{next}, normal, 3 * sizeof(float));
       }
-      out->vertex_surface.push_back(surface);
+      vertex_surface[next] = surface;
+      ++next;
     }
   }
+  out->positions.resize(3 * size_t{next});
+  if (has_normals) out->normals.resize(3 * size_t{next});
+  out->vertex_surface.resize(next);
   return absl::OkStatus();
 }
 

@@ -8,6 +8,7 @@
 
 #include "shared/ordered_mesh.h"
 #include "shared/status.h"
+#include "shared/uninitialized_vector.h"
 
 namespace isostream::internal {
 
@@ -15,15 +16,27 @@ namespace isostream::internal {
 // first use by the range's corners. A local vertex belongs to exactly one surface: a mesh vertex
 // used by triangles of two surfaces becomes two local vertices, so per-vertex encodings of the
 // surface (Draco attributes, glTF COLOR_0) stay exact.
+//
+// Uninitialized vectors: the gather sizes them for the worst case (3 vertices per triangle),
+// writes each element once and shrinks them, without zeroing first.
 struct GatheredChunk {
-  std::vector<float> positions;         // 3 per local vertex
-  std::vector<float> normals;           // 3 per local vertex; empty when the mesh has none
-  std::vector<uint8_t> vertex_surface;  // 1 per local vertex
-  std::vector<uint32_t> triangles;      // 3 local indices per triangle, in range order
-  std::vector<uint8_t> surface;         // 1 per triangle
+  UninitializedVector<float> positions;         // 3 per local vertex
+  UninitializedVector<float> normals;           // 3 per local vertex; empty when the mesh has none
+  UninitializedVector<uint8_t> vertex_surface;  // 1 per local vertex
+  UninitializedVector<uint32_t> triangles;      // 3 local indices per triangle, in range order
+  UninitializedVector<uint8_t> surface;         // 1 per triangle
 
   size_t vertex_count() const { return vertex_surface.size(); }
   size_t triangle_count() const { return surface.size(); }
+};
+
+// A decoded chunk, checked, before it is appended to the caller's mesh.
+struct DecodedChunk {
+  std::vector<float> positions;  // 3 per local vertex
+  std::vector<float> normals;    // 3 per local vertex; empty when the chunk has none
+  std::vector<uint8_t> tags;     // per local vertex: surface | "normal undefined" bit (0x80)
+  std::vector<uint32_t> triangles;
+  std::vector<uint8_t> triangle_surface;
 };
 
 // Lookup state that GatherTriangleRange calls over one mesh can share: a table indexed by mesh

@@ -131,7 +131,7 @@ DracoAttributeIds AddChunkAttributes(const GatheredChunk& chunk,
         AddAttribute(points, draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false,
                      chunk.normals.data(), chunk.normals.size() * sizeof(float));
   }
-  std::vector<uint8_t> tags(chunk.vertex_surface);
+  std::vector<uint8_t> tags(chunk.vertex_surface.begin(), chunk.vertex_surface.end());
   if (has_normals && settings.mark_undefined_normals) {
     for (size_t v = 0; v < vertex_count; ++v) {
       if (IsZero(&chunk.normals[3 * v])) tags[v] |= kUndefinedNormalBit;
@@ -285,15 +285,6 @@ absl::Status ReadDracoPointCloudCount(const char* data, size_t size, uint32_t* p
 
 namespace {
 
-// A decoded chunk, checked, before it is appended.
-struct DecodedChunk {
-  std::vector<float> positions;
-  std::vector<float> normals;  // empty when the chunk has none
-  std::vector<uint8_t> tags;   // per vertex: surface | kUndefinedNormalBit
-  std::vector<uint32_t> triangles;
-  std::vector<uint8_t> triangle_surface;
-};
-
 // Copies the chunk attributes out of a decoded Draco mesh or point cloud.
 absl::Status ReadVertexAttributes(const draco::PointCloud& points, uint32_t vertex_count,
                                   bool expect_normals, DecodedChunk* out) {
@@ -367,6 +358,11 @@ absl::Status Append(const DecodedChunk& chunk, OrderedMesh* append_to) {
 }
 
 }  // namespace
+
+absl::Status AppendDecodedChunk(DecodedChunk* chunk, OrderedMesh* append_to) {
+  ISOSTREAM_RETURN_IF_ERROR(AssignTriangleSurfaces(chunk));
+  return Append(*chunk, append_to);
+}
 
 absl::Status DecodeDracoMesh(const char* data, size_t size, uint32_t triangle_count,
                              uint32_t vertex_count, bool expect_normals, OrderedMesh* append_to) {

@@ -74,6 +74,11 @@ absl::Status ReadDracoPointCloudCount(const char* data, size_t size, uint32_t* p
 absl::Status DecodeDracoMesh(const char* data, size_t size, uint32_t triangle_count,
                              uint32_t vertex_count, bool expect_normals, OrderedMesh* append_to);
 
+// Checks that each triangle's corners (local indices, already checked against the vertex
+// count) agree on a valid surface, then appends `chunk` to `append_to` as DecodeChunk
+// documents; on error `append_to` is unchanged.
+absl::Status AppendDecodedChunk(DecodedChunk* chunk, OrderedMesh* append_to);
+
 // Decodes the point cloud in data[0, size) written by EncodeDracoPoints, which must hold
 // exactly `vertex_count` points (checked against Draco's header before decoding) and a NORMAL
 // attribute iff `expect_normals`, and appends it with `triangles` (local indices, 3 per

@@ -1,13 +1,16 @@
 #include "shared/internal/ordered_connectivity.h"
 
+#include "shared/internal/symbol_stream.h"
+#include "shared/uninitialized_vector.h"
+
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #include <absl/strings/str_cat.h>
-#include <draco/compression/config/compression_shared.h>
-#include <draco/compression/entropy/symbol_decoding.h>
-#include <draco/compression/entropy/symbol_encoding.h>
-#include <draco/core/decoder_buffer.h>
-#include <draco/core/encoder_buffer.h>
 
 #include <algorithm>
+#include <cstring>
 #include <limits>
 #include <memory>
 
@@ -15,7 +18,7 @@ namespace isostream::internal {
 namespace {
 
 static_assert((kEdgeFifoSize & (kEdgeFifoSize - 1)) == 0, "the edge FIFO is a power-of-2 ring");
-static_assert((kVertexCacheSize & (kVertexCacheSize - 1)) == 0, "the cache is a power-of-2 ring");
+static_assert(kVertexCacheSize % 4 == 0, "the cache is searched four entries at a time");
 
 uint64_t EdgeKey(uint32_t from, uint32_t to) { return (uint64_t{from} << 32) | to; }
 
@@ -23,7 +26,12 @@ uint64_t EdgeKey(uint32_t from, uint32_t to) { return (uint64_t{from} << 32) | t
 class CoderState {
  public:
   // Vertices are numbered 0..vertex_count-1.
-  explicit CoderState(size_t vertex_count) : in_cache_(vertex_count, 0) {}
+  explicit CoderState(size_t vertex_count) : in_cache_(vertex_count, 0) {
+    // No vertex has this number (vertex_count < 2^32), so unused entries never match.
+    std::fill_n(window_, kWindowSpace, 0xffffffffu);
+  }
+  CoderState(const CoderState&) = delete;  // cache_ points into window_
+  CoderState& operator=(const CoderState&) = delete;
 
   // Most recent first: k = 0 is the last edge pushed. Requires k < edge_count().
   uint64_t edge(uint32_t k) const { return edges_[(pushes_ - 1 - k) & (kEdgeFifoSize - 1)]; }
@@ -32,16 +40,34 @@ class CoderState {
   uint32_t pushes() const { return pushes_; }
 
   // Most recent first. Requires i < cache_size().
-  uint32_t cached(uint32_t i) const { return cache_[Slot(i)]; }
+  uint32_t cached(uint32_t i) const { return cache_[i]; }
   uint32_t cache_size() const { return cache_size_; }
 
-  // Position of `vertex` in the cache, or cache_size() if absent. Most lookups are of recently
-  // used vertices, near the front.
+  // Position of `vertex` in the cache, or cache_size() if absent: the per-vertex flag answers
+  // misses, and a hit compares all entries at once (they are distinct) instead of walking.
   uint32_t FindCached(uint32_t vertex) const {
     if (!in_cache_[vertex]) return cache_size_;
+#ifdef __SSE2__
+    const __m128i key = _mm_set1_epi32(static_cast<int>(vertex));
+    // Most hits are among the first eight entries: look there first.
+    uint32_t hits = 0;
+    for (uint32_t i = 0; i < 8; i += 4) {
+      const __m128i entries = _mm_loadu_si128(reinterpret_cast<const __m128i*>(cache_ + i));
+      const __m128i equal = _mm_cmpeq_epi32(entries, key);
+      hits |= static_cast<uint32_t>(_mm_movemask_ps(_mm_castsi128_ps(equal))) << i;
+    }
+    if (hits) return static_cast<uint32_t>(__builtin_ctz(hits));
+    for (uint32_t i = 8; i < kVertexCacheSize; i += 4) {
+      const __m128i entries = _mm_loadu_si128(reinterpret_cast<const __m128i*>(cache_ + i));
+      const __m128i equal = _mm_cmpeq_epi32(entries, key);
+      hits |= static_cast<uint32_t>(_mm_movemask_ps(_mm_castsi128_ps(equal))) << i;
+    }
+    return hits ? static_cast<uint32_t>(__builtin_ctz(hits)) : cache_size_;
+#else
     uint32_t i = 0;
-    while (i < cache_size_ && cache_[Slot(i)] != vertex) ++i;
+    while (i < cache_size_ && cache_[i] != vertex) ++i;
     return i;
+#endif
   }
 
   // What a caller knows of a corner's cache position before the triangle is recorded.
@@ -76,31 +102,57 @@ class CoderState {
   }
 
  private:
-  // The cache is a ring: position i lives in slot front_ + i.
-  uint32_t Slot(uint32_t i) const { return (front_ + i) & (kVertexCacheSize - 1); }
-
   // Moves `vertex`, at position `from` (cache_size() if absent), to the front, dropping the
-  // least recent vertex when the cache is full.
+  // least recent vertex when the cache is full: entries 0..from-1 move up by one.
   void MoveToFront(uint32_t vertex, uint32_t from) {
     if (from == cache_size_) {
-      // New to the cache: it takes the slot before the front (the least recent one if full).
-      front_ = (front_ - 1) & (kVertexCacheSize - 1);
+      // New to the cache, about one corner in six: the cache slides down one entry in window_
+      // instead of every entry moving up, and the least recent one falls off its end.
       if (cache_size_ == kVertexCacheSize) {
-        in_cache_[cache_[front_]] = 0;
+        in_cache_[cache_[kVertexCacheSize - 1]] = 0;
       } else {
         ++cache_size_;
       }
       in_cache_[vertex] = 1;
-    } else {
-      for (uint32_t i = from; i > 0; --i) cache_[Slot(i)] = cache_[Slot(i - 1)];
+      if (cache_ == window_) {  // at the bottom of window_: move back to the top
+        std::memmove(window_ + kWindowSpace - kVertexCacheSize, window_,
+                     kVertexCacheSize * sizeof(uint32_t));
+        cache_ = window_ + kWindowSpace - kVertexCacheSize;
+      }
+      *--cache_ = vertex;
+      return;
     }
-    cache_[front_] = vertex;
+#ifdef __SSE2__
+    // Four entries at a time, only as far as `from`: a lane takes its left neighbour (the
+    // first lane the previous group's last) where its position is at most `from`. A memmove
+    // call costs more than this for the few entries a move usually shifts.
+    const __m128i limit = _mm_set1_epi32(static_cast<int>(from) + 1);
+    __m128i carry = _mm_cvtsi32_si128(static_cast<int>(vertex));
+    __m128i position = _mm_setr_epi32(0, 1, 2, 3);
+    const __m128i four = _mm_set1_epi32(4);
+    for (uint32_t i = 0; i <= from; i += 4) {
+      __m128i* group = reinterpret_cast<__m128i*>(cache_ + i);
+      const __m128i entries = _mm_loadu_si128(group);
+      const __m128i shifted = _mm_or_si128(_mm_slli_si128(entries, 4), carry);
+      carry = _mm_srli_si128(entries, 12);
+      const __m128i take = _mm_cmplt_epi32(position, limit);
+      _mm_storeu_si128(group,
+                       _mm_or_si128(_mm_and_si128(take, shifted), _mm_andnot_si128(take, entries)));
+      position = _mm_add_epi32(position, four);
+    }
+#else
+    for (uint32_t i = from; i > 0; --i) cache_[i] = cache_[i - 1];
+    cache_[0] = vertex;
+#endif
   }
 
   uint64_t edges_[kEdgeFifoSize] = {};
   uint32_t pushes_ = 0;  // wraps only past 2^32 edges, far more than a chunk has
-  uint32_t cache_[kVertexCacheSize] = {};
-  uint32_t front_ = 0;
+  static constexpr uint32_t kWindowSpace = 8 * kVertexCacheSize;
+  // The cache is the kVertexCacheSize entries from cache_, most recent first, unused ones
+  // 0xffffffff; cache_ slides down through window_ as new vertices arrive.
+  uint32_t window_[kWindowSpace];
+  uint32_t* cache_ = window_ + kWindowSpace - kVertexCacheSize;
   uint32_t cache_size_ = 0;
   std::vector<uint8_t> in_cache_;  // per vertex: 1 while it is in cache_
 };
@@ -138,22 +190,10 @@ class EdgeIndex {
   Slot slots_[size_t{1} << kBits];
 };
 
-bool AppendSymbols(const std::vector<uint32_t>& symbols, std::string* out) {
-  if (symbols.empty()) return true;
-  draco::EncoderBuffer buffer;
-  // Draco's default compression level; higher levels change nothing on these small alphabets.
-  if (!draco::EncodeSymbols(symbols.data(), static_cast<int>(symbols.size()), 1, nullptr,
-                            &buffer)) {
-    return false;
-  }
-  out->append(buffer.data(), buffer.size());
-  return true;
-}
-
-bool ReadSymbols(draco::DecoderBuffer* buffer, size_t count, std::vector<uint32_t>* symbols) {
+bool ReadArray(const char* data, size_t size, size_t* at, size_t count,
+               std::vector<uint32_t>* symbols) {
   symbols->resize(count);
-  if (count == 0) return true;
-  return draco::DecodeSymbols(static_cast<uint32_t>(count), 1, buffer, symbols->data());
+  return count == 0 || ReadSymbols(data, size, at, count, symbols->data());
 }
 
 }  // namespace
@@ -164,39 +204,35 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
       vertex_count > std::numeric_limits<uint32_t>::max()) {
     return absl::InvalidArgumentError("too many triangles or vertices for one chunk");
   }
-  std::vector<uint32_t> triangle_symbols(triangle_count);
-  std::vector<uint32_t> corner_symbols;
-  std::vector<uint32_t> explicit_values;
-  corner_symbols.reserve(triangle_count + vertex_count);
+  // Written once each, at most one corner symbol and one explicit value per corner.
+  UninitializedVector<uint32_t> triangle_symbols(triangle_count);
+  UninitializedVector<uint32_t> corner_symbols(3 * triangle_count);
+  UninitializedVector<uint32_t> explicit_values(3 * triangle_count);
+  size_t corners = 0, explicits = 0;
   CoderState state(vertex_count);
   auto index = std::make_unique<EdgeIndex>();
   auto record = [&index](uint64_t key, uint32_t push) { index->Record(key, push); };
   uint32_t next = 0;  // the number a new vertex gets
 
-  auto code_corner = [&](uint32_t vertex, uint32_t* at) -> absl::Status {
+  // Codes one corner; false if `vertex` breaks first-use order or the vertex count.
+  auto code_corner = [&](uint32_t vertex, uint32_t* at) -> bool {
     if (vertex == next) {
       *at = CoderState::kAbsent;
-      if (next == vertex_count) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("vertex index ", vertex, " is not below the vertex count"));
-      }
+      if (next == vertex_count) return false;
       ++next;
-      corner_symbols.push_back(0);
-      return absl::OkStatus();
+      corner_symbols[corners++] = 0;
+      return true;
     }
-    if (vertex > next) {
-      return absl::InvalidArgumentError(absl::StrCat("vertex ", vertex, " is used before vertex ",
-                                                     next, ": not in first-use order"));
-    }
+    if (vertex > next) return false;
     *at = state.FindCached(vertex);
     if (*at < state.cache_size()) {
-      corner_symbols.push_back(1 + *at);
+      corner_symbols[corners++] = 1 + *at;
     } else {
       *at = CoderState::kAbsent;
-      corner_symbols.push_back(kExplicitCorner);
-      explicit_values.push_back(next - 1 - vertex);
+      corner_symbols[corners++] = kExplicitCorner;
+      explicit_values[explicits++] = next - 1 - vertex;
     }
-    return absl::OkStatus();
+    return true;
   };
 
   for (size_t t = 0; t < triangle_count; ++t) {
@@ -209,11 +245,17 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
     }
     triangle_symbols[t] = symbol;
     uint32_t at[3] = {CoderState::kUnknown, CoderState::kUnknown, CoderState::kUnknown};
+    bool ok = true;
     if (symbol == kNoEdge) {
-      for (int r = 0; r < 3; ++r) ISOSTREAM_RETURN_IF_ERROR(code_corner(x[r], &at[r]));
+      ok = code_corner(x[0], &at[0]) && code_corner(x[1], &at[1]) && code_corner(x[2], &at[2]);
     } else {
       const int r = (symbol % 3 + 2) % 3;
-      ISOSTREAM_RETURN_IF_ERROR(code_corner(x[r], &at[r]));
+      ok = code_corner(x[r], &at[r]);
+    }
+    if (!ok) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("triangle ", t, " uses a vertex that is not the next new one (", next,
+                       ") nor an earlier one, or is not below the vertex count ", vertex_count));
     }
     state.Add(x, at, record);
   }
@@ -221,10 +263,9 @@ absl::Status EncodeOrderedConnectivity(const uint32_t* triangles, size_t triangl
     return absl::InvalidArgumentError(
         absl::StrCat("the triangles use ", next, " of ", vertex_count, " vertices"));
   }
-  if (!AppendSymbols(triangle_symbols, out) || !AppendSymbols(corner_symbols, out) ||
-      !AppendSymbols(explicit_values, out)) {
-    return absl::InternalError("Draco's symbol encoder failed on the connectivity");
-  }
+  if (triangle_count > 0) AppendSymbols(triangle_symbols.data(), triangle_count, out);
+  if (corners > 0) AppendSymbols(corner_symbols.data(), corners, out);
+  if (explicits > 0) AppendSymbols(explicit_values.data(), explicits, out);
   return absl::OkStatus();
 }
 
@@ -234,12 +275,9 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
       vertex_count > std::numeric_limits<uint32_t>::max()) {
     return absl::DataLossError("connectivity counts out of range");
   }
-  draco::DecoderBuffer buffer;
-  // Symbol streams are read according to the buffer's bitstream version (0, unset, selects a
-  // pre-2.0 layout); EncodeSymbols writes the current one.
-  buffer.Init(data, size, draco::kDracoMeshBitstreamVersion);
+  size_t read_at = 0;
   std::vector<uint32_t> triangle_symbols;
-  if (!ReadSymbols(&buffer, triangle_count, &triangle_symbols)) {
+  if (!ReadArray(data, size, &read_at, triangle_count, &triangle_symbols)) {
     return absl::DataLossError("connectivity: triangle symbols do not decode");
   }
   size_t corner_count = 0;
@@ -248,7 +286,7 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
     corner_count += s == kNoEdge ? 3 : 1;
   }
   std::vector<uint32_t> corner_symbols;
-  if (!ReadSymbols(&buffer, corner_count, &corner_symbols)) {
+  if (!ReadArray(data, size, &read_at, corner_count, &corner_symbols)) {
     return absl::DataLossError("connectivity: corner symbols do not decode");
   }
   size_t explicit_count = 0;
@@ -257,10 +295,10 @@ absl::Status DecodeOrderedConnectivity(const char* data, size_t size, size_t tri
     explicit_count += s == kExplicitCorner;
   }
   std::vector<uint32_t> explicit_values;
-  if (!ReadSymbols(&buffer, explicit_count, &explicit_values)) {
+  if (!ReadArray(data, size, &read_at, explicit_count, &explicit_values)) {
     return absl::DataLossError("connectivity: explicit corners do not decode");
   }
-  if (buffer.remaining_size() != 0) {
+  if (read_at != size) {
     return absl::DataLossError("connectivity: bytes left over after the last symbol");
   }
 

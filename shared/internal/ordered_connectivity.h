@@ -15,7 +15,8 @@
 // corners. A corner is coded as "new vertex", as a cache position, or explicitly as the
 // distance back from the newest vertex.
 //
-// Stream: three symbol arrays, each written with Draco's entropy coder (draco::EncodeSymbols)
+// Stream: three symbol arrays, each written with isostream's rANS coder (AppendSymbols,
+// shared/internal/symbol_stream.h)
 // and omitted when empty, one after the other with nothing in between:
 //   triangle symbols, one per triangle: 3k + r for an edge match, kNoEdge otherwise;
 //   corner symbols, one per coded corner: 0 new, 1 + i cache position i, kExplicitCorner;
