@@ -121,7 +121,7 @@ void CodecBreakdown(const OrderedMesh& mesh, const CodecOptions& options) {
   const double t = double(mesh.triangle_count());
   std::printf(
       "  default codec by part (B/tri): connectivity %.3f, vertex attributes %.3f (normals "
-      "%.3f, surface index %.3f, positions and Draco framing %.3f), chunk headers %.4f\n",
+      "%.3f, surface index %.3f, positions and framing %.3f), chunk headers %.4f\n",
       connectivity / t, points / t, (points - no_normals_points) / t,
       (points - one_surface_points) / t, (no_normals_points - (points - one_surface_points)) / t,
       header / t);
