@@ -107,30 +107,9 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
     return out;
   }();  // a property of the reference classes: computed once, not per request
   std::copy(negative.begin(), negative.end(), c.negative);
-  struct IntegerPlanes {
-    int8_t n[kNumTetClasses][3];
-  };
-  static const IntegerPlanes planes = [&] {
-    // Reference coordinates are 0, 1 or 2, so 4 x the plane's cross-product normal (through
-    // the refinement edge's midpoint) is integral; reduced by the gcd its entries are 0 or +-1.
-    IntegerPlanes out{};
-    for (int i = 0; i < kNumTetClasses; ++i) {
-      const ReferenceTet& rt = (*c.tables)[TetClass{uint8_t(i)}];
-      const glm::ivec3 p0 = 2 * rt.vertex[0], p1 = 2 * rt.vertex[1], p2 = 2 * rt.vertex[2],
-                       p3 = 2 * rt.vertex[3];
-      const glm::ivec3 mid = (p0 + p3) / 2;
-      const glm::ivec3 a = p1 - mid, b = p2 - mid;
-      glm::ivec3 n(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
-      const int g = std::gcd(std::gcd(std::abs(n.x), std::abs(n.y)), std::abs(n.z));
-      n /= g;
-      if (glm::dot(glm::dvec3(n), rt.plane_normal) < 0) n = -n;
-      for (int a2 = 0; a2 < 3; ++a2) out.n[i][a2] = int8_t(n[a2]);
-    }
-    return out;
-  }();
   for (int i = 0; i < kNumTetClasses; ++i) {
-    const glm::dvec3 n(planes.n[i][0], planes.n[i][1], planes.n[i][2]);
-    for (int a = 0; a < 3; ++a) c.plane[i][a] = planes.n[i][a];
+    const auto& ni = (*c.tables)[TetClass{uint8_t(i)}].plane_normal_int;
+    const glm::dvec3 n(ni[0], ni[1], ni[2]);
     c.plane_eye[i] = glm::dot(n, c.eye);
     c.ortho_child0_first[i] = glm::dot(n, c.dir) >= 0;  // eye on child 1's side of every plane
   }

@@ -75,11 +75,9 @@ struct Context {
   const ReferenceTets* tables = nullptr;
   const MarchingTets* cases = nullptr;
   uint8_t negative[kNumTetClasses];  // 1: the class's canonical vertex order is left-handed
-  // Separating planes per class as small integer normals (a positive multiple of
-  // ReferenceTet::plane_normal), and per request: perspective, normal . eye (grid space), so
-  // the eye's side of a plane through grid point x is an exact integer dot product and one
-  // subtraction; orthographic, whether child 0 is drawn first (the same for every node).
-  int8_t plane[kNumTetClasses][3];
+  // Per class, against ReferenceTet::plane_normal_int: perspective, normal . eye (grid space),
+  // so the eye's side of a plane through grid point x is an exact integer dot product and one
+  // comparison; orthographic, whether child 0 is drawn first (the same for every node).
   double plane_eye[kNumTetClasses];
   uint8_t ortho_child0_first[kNumTetClasses];
   // 1 / (real length of one normalised class unit) per level: half the level's cube cell.
@@ -159,7 +157,7 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
     if (c.orthographic) {
       child0_first = c.ortho_child0_first[cls];
     } else {
-      const int8_t* n = c.plane[cls];
+      const int8_t* n = rt.plane_normal_int.data();
       const int64_t nx = n[0] * int64_t(x & kFieldMask) +
                          n[1] * int64_t((x >> kFieldBits) & kFieldMask) +
                          n[2] * int64_t(x >> (2 * kFieldBits));

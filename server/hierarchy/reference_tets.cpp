@@ -12,6 +12,7 @@
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
 #include <map>
+#include <numeric>
 #include <stdexcept>
 
 namespace isostream {
@@ -174,6 +175,15 @@ ReferenceTets::ReferenceTets() {
     glm::dvec3 n = glm::cross(p1 - mid, p2 - mid);
     if (glm::dot(n, p0 - mid) < 0) n = -n;
     t.plane_normal = glm::normalize(n);
+    {
+      // In doubled coordinates the midpoint is a grid point and the cross product integral.
+      const glm::ivec3 m2 = t.vertex[0] + t.vertex[3];
+      const glm::ivec3 a = 2 * t.vertex[1] - m2, b = 2 * t.vertex[2] - m2;
+      glm::ivec3 ni(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+      ni /= std::gcd(std::gcd(std::abs(ni.x), std::abs(ni.y)), std::abs(ni.z));
+      if (glm::dot(glm::dvec3(ni), n) < 0) ni = -ni;
+      for (int a2 = 0; a2 < 3; ++a2) t.plane_normal_int[a2] = static_cast<int8_t>(ni[a2]);
+    }
     // Rows of E^-1 are the gradients of barycentric coordinates 1..3; lambda_0 = 1 - rest.
     const glm::dmat3 edges(p1 - p0, p2 - p0, p3 - p0);  // columns
     const glm::dmat3 inv_t = glm::transpose(glm::inverse(edges));

@@ -42,6 +42,9 @@ struct ReferenceTet {
   // Unit normal of the separating plane (through the refinement vertex, vertex[1], vertex[2]),
   // pointing into child[0]. child[0] is drawn first iff the eye is on child[1]'s side.
   glm::dvec3 plane_normal{0.0};
+  // The same normal as small integers (entries 0 or +-1, a positive multiple of plane_normal):
+  // the extractor tests the eye's side against a grid point with an exact integer dot product.
+  std::array<int8_t, 3> plane_normal_int{0, 0, 0};
   // §5: gradient of child c = parent gradient + wavelet * gradient_update[c] / unit, where
   // wavelet = f(refinement vertex) - (f(vertex[0]) + f(vertex[3])) / 2 and unit is the real
   // length of one normalised coordinate step (half the tet's largest extent).
