@@ -95,6 +95,8 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.world_spacing = glm::vec3(xf.spacing);
   c.inv_spacing = glm::vec3(1.0 / xf.spacing);
   c.tables = &ReferenceTets::Get();
+  c.blocks = &BlockTables::Get();
+  c.block_level = 3 * c.k - kBlockDepth;
   c.cases = &MarchingTets::Get();
   static const std::array<uint8_t, kNumTetClasses> negative = [&] {
     std::array<uint8_t, kNumTetClasses> out{};

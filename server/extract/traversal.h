@@ -25,6 +25,7 @@
 #include "server/extract/marching_tets.h"
 #include "server/extract/subtree_mesh.h"
 #include "server/hierarchy/bisection.h"
+#include "server/hierarchy/block_tables.h"
 #include "server/hierarchy/hierarchy.h"
 
 namespace isostream::extract_internal {
@@ -73,6 +74,8 @@ struct Context {
   glm::vec3 world_origin{0.0f}, world_spacing{1.0f};  // xf in single precision
   glm::vec3 inv_spacing{1.0f};  // grid-space gradient -> world-space gradient
   const ReferenceTets* tables = nullptr;
+  const BlockTables* blocks = nullptr;
+  int block_level = 0;  // 3k - 3: nodes refined here run the last three levels as one block
   const MarchingTets* cases = nullptr;
   uint8_t negative[kNumTetClasses];  // 1: the class's canonical vertex order is left-handed
   // Per class, against ReferenceTet::plane_normal_int: perspective, normal . eye (grid space),
@@ -143,6 +146,17 @@ inline Decision Decide(const Context& c, const Node& t) {
   return Decide(c, t, &first, &last);
 }
 
+// Whether child 0 of a tetrahedron of class cls (tables entry rt) with refinement vertex x is
+// drawn first: unless the eye is on its side of the separating plane.
+inline bool ChildZeroFirst(const Context& c, const ReferenceTet& rt, TetClass cls, PackedPoint x) {
+  if (!c.ordered) return true;
+  if (c.orthographic) return c.ortho_child0_first[cls.value];
+  const int8_t* n = rt.plane_normal_int.data();
+  const int64_t nx = n[0] * int64_t(x & kFieldMask) + n[1] * int64_t((x >> kFieldBits) & kFieldMask) +
+                     n[2] * int64_t(x >> (2 * kFieldBits));
+  return c.plane_eye[cls.value] <= double(nx);
+}
+
 // The children of t in draw order: the farther one (drawn first) in *first.
 inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
@@ -151,19 +165,7 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
   const PackedPoint points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
   const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
-  bool child0_first = true;  // unless the eye is on child 0's side
-  if (c.ordered) {
-    const int cls = t.cls.value;
-    if (c.orthographic) {
-      child0_first = c.ortho_child0_first[cls];
-    } else {
-      const int8_t* n = rt.plane_normal_int.data();
-      const int64_t nx = n[0] * int64_t(x & kFieldMask) +
-                         n[1] * int64_t((x >> kFieldBits) & kFieldMask) +
-                         n[2] * int64_t(x >> (2 * kFieldBits));
-      child0_first = c.plane_eye[cls] <= double(nx);
-    }
-  }
+  const bool child0_first = ChildZeroFirst(c, rt, t.cls, x);
   for (int ch = 0; ch < 2; ++ch) {
     Node& o = *((ch == 0) == child0_first ? first : second);
     const uint8_t* cp = rt.child_point[ch].data();
@@ -242,6 +244,11 @@ class Traverser {
       int first, last;
       switch (Decide(c_, *cur, &first, &last)) {
         case Decision::kRefine:
+          if (cur->level == c_.block_level && (!c_.clip || InsideDataBox(*cur))) {
+            triangles += Block(*cur, &visited);
+            if (!kEmit && triangles > limit) return triangles;
+            break;
+          }
           Bisect(c_, *cur, spare, &stack[top++]);
           std::swap(cur, spare);
           continue;
@@ -260,6 +267,116 @@ class Traverser {
   }
 
  private:
+  // The last three levels below a node at level 3k - 3 that is to be refined, as one block:
+  // its 6 edge midpoints are read once, and which of the 8 finest tetrahedra cross an isovalue
+  // is decided on bit sets of the block's 10 points. Only subtrees holding a crossing finest
+  // tetrahedron are entered (exact: a tetrahedron of the block crosses only if some finest one
+  // below it does, the finest ones tiling it), so no eta is read but to stop refining when
+  // eps > 0. Leaves, their order and their arithmetic are those of refining node by node.
+  struct BlockFrame {
+    const Node* root;
+    const BlockNode* nodes;
+    PackedPoint p[kBlockPoints];
+    float f[kBlockPoints];
+    unsigned above[kMaxSurfaces];  // points with f >= iso[s], for s in [s0, s1)
+    int s0, s1;
+    unsigned crossing;  // bit j: the finest tetrahedron at heap position 8 + j crosses
+  };
+
+  int64_t Block(const Node& root, int64_t* visited) {
+    BlockFrame fr;
+    fr.root = &root;
+    fr.nodes = (*c_.blocks)[root.cls];
+    for (int i = 0; i < 4; ++i) fr.p[i] = root.v[i], fr.f[i] = root.f[i];
+    for (int e = 0; e < 6; ++e) {
+      fr.p[4 + e] = (root.v[kBlockEdge[e][0]] + root.v[kBlockEdge[e][1]]) >> 1;
+      fr.f[4 + e] = c_.F(c_.ValueOffset(fr.p[4 + e]));
+    }
+    float lo = fr.f[0], hi = fr.f[0];
+    for (int i = 1; i < kBlockPoints; ++i) lo = std::min(lo, fr.f[i]), hi = std::max(hi, fr.f[i]);
+    IsoRange(c_, lo, hi, &fr.s0, &fr.s1);
+    const uint16_t* leaf_corners = c_.blocks->leaf_corners(root.cls);
+    fr.crossing = 0;
+    for (int s = fr.s0; s < fr.s1; ++s) {
+      unsigned m = 0;
+      for (int i = 0; i < kBlockPoints; ++i) m |= unsigned(fr.f[i] >= c_.iso[s]) << i;
+      fr.above[s] = m;
+      for (int j = 0; j < 8; ++j) {
+        const unsigned x = m & leaf_corners[j];
+        fr.crossing |= unsigned(x != 0 && x != leaf_corners[j]) << j;
+      }
+    }
+    if (fr.crossing == 0) return 0;
+    return BlockVisit<0>(fr, 1, visited);
+  }
+
+  template <int kDepth>
+  int64_t BlockVisit(const BlockFrame& fr, unsigned at, int64_t* visited) {
+    if constexpr (kDepth == kBlockDepth) {
+      if (!((fr.crossing >> (at - 8)) & 1)) return 0;
+      ++*visited;
+      return BlockLeaf(fr, at, kDepth);
+    } else {
+      constexpr int kBelow = kBlockDepth - kDepth;
+      const unsigned finest = (fr.crossing >> ((at << kBelow) - 8)) & ((1u << (1 << kBelow)) - 1);
+      if (finest == 0) return 0;
+      const BlockNode& b = fr.nodes[at];
+      if (kDepth > 0) {  // the root was counted, and decided to refine, by the caller
+        ++*visited;
+        if (c_.eps > 0 && c_.Eta(c_.EtaOffset(fr.p[b.refinement])) < c_.eps)
+          return BlockLeaf(fr, at, kDepth);
+      }
+      const unsigned far =
+          2 * at + (ChildZeroFirst(c_, (*c_.tables)[b.cls], b.cls, fr.p[b.refinement]) ? 0 : 1);
+      const int64_t n = BlockVisit<kDepth + 1>(fr, far, visited);
+      return n + BlockVisit<kDepth + 1>(fr, far ^ 1, visited);
+    }
+  }
+
+  // Emits block position `at` as a leaf if an isovalue crosses it.
+  int BlockLeaf(const BlockFrame& fr, unsigned at, int depth) {
+    const BlockNode& b = fr.nodes[at];
+    // Past the isovalues all corners reach, before those none does (the sets shrink with s).
+    int first = fr.s0;
+    while (first < fr.s1 && (fr.above[first] & b.corners) == b.corners) ++first;
+    int last = first;
+    while (last < fr.s1 && (fr.above[last] & b.corners) != 0) ++last;
+    if (first == last) return 0;
+    Node t;
+    for (int i = 0; i < 4; ++i) t.v[i] = fr.p[b.corner[i]], t.f[i] = fr.f[b.corner[i]];
+    t.cls = b.cls;
+    t.level = fr.root->level + depth;
+    // The gradient is needed for flat normals, and otherwise only to order several crossing
+    // surfaces or when central differences vanish: computed on demand then (LeafGradient).
+    if (c_.normals != NormalMode::kSmooth) {
+      t.g = BlockGradient(fr, at, depth);
+      return Leaf(t, first, last);
+    }
+    frame_ = &fr, frame_at_ = at, frame_depth_ = depth;
+    const int n = Leaf(t, first, last);
+    frame_ = nullptr;
+    return n;
+  }
+
+  // The gradient of block position `at` by the §5 updates along its path, in the order and
+  // arithmetic of Bisect.
+  glm::dvec3 BlockGradient(const BlockFrame& fr, unsigned at, int depth) const {
+    glm::dvec3 g = fr.root->g;
+    for (int d = 0; d < depth; ++d) {
+      const BlockNode& a = fr.nodes[at >> (depth - d)];
+      const int ch = (at >> (depth - d - 1)) & 1;
+      const double w = (double(fr.f[a.refinement]) -
+                        0.5 * (double(fr.f[a.corner[0]]) + double(fr.f[a.corner[3]]))) *
+                       c_.inv_unit[fr.root->level + d];
+      g = g + w * (*c_.tables)[a.cls].gradient_update[ch];
+    }
+    return g;
+  }
+
+  glm::dvec3 LeafGradient(const Node& t) const {
+    return frame_ ? BlockGradient(*frame_, frame_at_, frame_depth_) : t.g;
+  }
+
   int Leaf(const Node& t, int first, int last) {
     if (kEmit) ++out_->leaves;
     if (last - first == 1) return Component(t, first);
@@ -267,11 +384,11 @@ class Traverser {
     if (!c_.ordered) {
       for (int i = first; i < last; ++i) order[count++] = i;
     } else if (c_.orthographic) {
-      const bool descending = glm::dot(t.g, c_.dir) > 0;  // f grows away from the eye
+      const bool descending = glm::dot(LeafGradient(t), c_.dir) > 0;  // f grows away from the eye
       for (int i = first; i < last; ++i) order[count++] = descending ? last - 1 - (i - first) : i;
     } else {
       // Isovalues above f_T(eye), highest first; then those at or below it, lowest first.
-      const double fe = t.f[0] + glm::dot(t.g, c_.eye - glm::dvec3(Unpack(t.v[0])));
+      const double fe = t.f[0] + glm::dot(LeafGradient(t), c_.eye - glm::dvec3(Unpack(t.v[0])));
       int split = first;
       while (split < last && c_.iso[split] <= fe) ++split;
       for (int i = last - 1; i >= split; --i) order[count++] = i;
@@ -374,10 +491,12 @@ class Traverser {
     const float tt = float((double(c_.iso[s]) - fa) / (double(fb) - fa));
     const glm::vec3 pg = glm::vec3(a) + tt * glm::vec3(d);
     const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
-    glm::vec3 grad = glm::vec3(t.g);
+    glm::vec3 grad;
     if (share) {
       const glm::vec3 g = glm::mix(GridGradient(a), GridGradient(b), tt);
-      if (glm::dot(g, g) != 0) grad = g;
+      grad = glm::dot(g, g) != 0 ? g : glm::vec3(LeafGradient(t));
+    } else {
+      grad = glm::vec3(t.g);
     }
     grad *= c_.inv_spacing;
     const float len2 = glm::dot(grad, grad);
@@ -466,6 +585,10 @@ class Traverser {
   EdgeVertexTable* table_;
   SubtreeMesh* out_;
   RootFaces faces_{TetVertices{}};
+  // Set while a block leaf is emitted: its gradient is derived from the block on demand.
+  const BlockFrame* frame_ = nullptr;
+  unsigned frame_at_ = 0;
+  int frame_depth_ = 0;
 };
 
 }  // namespace isostream::extract_internal
