@@ -19,6 +19,9 @@
 #include <glm/geometric.hpp>
 #include <glm/vec3.hpp>
 #include <vector>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "server/extract/edge_vertex_table.h"
 #include "server/extract/extract_request.h"
@@ -298,16 +301,44 @@ class Traverser {
     const uint16_t* leaf_corners = c_.blocks->leaf_corners(root.cls);
     fr.crossing = 0;
     for (int s = fr.s0; s < fr.s1; ++s) {
-      unsigned m = 0;
-      for (int i = 0; i < kBlockPoints; ++i) m |= unsigned(fr.f[i] >= c_.iso[s]) << i;
+      const unsigned m = AbovePoints(fr.f, c_.iso[s]);
       fr.above[s] = m;
-      for (int j = 0; j < 8; ++j) {
-        const unsigned x = m & leaf_corners[j];
-        fr.crossing |= unsigned(x != 0 && x != leaf_corners[j]) << j;
-      }
+      fr.crossing |= CrossingLeaves(leaf_corners, m);
     }
     if (fr.crossing == 0) return 0;
     return BlockVisit<0>(fr, 1, visited);
+  }
+
+  // Bit i: f[i] >= iso, for the block's 10 points.
+  static unsigned AbovePoints(const float* f, float iso) {
+#ifdef __SSE2__
+    const __m128 v = _mm_set1_ps(iso);
+    const unsigned lo = unsigned(_mm_movemask_ps(_mm_cmpge_ps(_mm_loadu_ps(f), v)));
+    const unsigned mid = unsigned(_mm_movemask_ps(_mm_cmpge_ps(_mm_loadu_ps(f + 4), v)));
+    return lo | mid << 4 | unsigned(f[8] >= iso) << 8 | unsigned(f[9] >= iso) << 9;
+#else
+    unsigned m = 0;
+    for (int i = 0; i < kBlockPoints; ++i) m |= unsigned(f[i] >= iso) << i;
+    return m;
+#endif
+  }
+
+  // Bit j: the finest tetrahedron j (corner sets `leaf_corners`) has corners on both sides.
+  static unsigned CrossingLeaves(const uint16_t* leaf_corners, unsigned above) {
+#ifdef __SSE2__
+    const __m128i corners = _mm_load_si128(reinterpret_cast<const __m128i*>(leaf_corners));
+    const __m128i x = _mm_and_si128(corners, _mm_set1_epi16(short(above)));
+    const __m128i one_side =
+        _mm_or_si128(_mm_cmpeq_epi16(x, _mm_setzero_si128()), _mm_cmpeq_epi16(x, corners));
+    return ~unsigned(_mm_movemask_epi8(_mm_packs_epi16(one_side, one_side))) & 0xffu;
+#else
+    unsigned crossing = 0;
+    for (int j = 0; j < 8; ++j) {
+      const unsigned x = above & leaf_corners[j];
+      crossing |= unsigned(x != 0 && x != leaf_corners[j]) << j;
+    }
+    return crossing;
+#endif
   }
 
   template <int kDepth>
