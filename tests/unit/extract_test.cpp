@@ -9,6 +9,7 @@
 #include <random>
 #include <set>
 
+#include "marching_reference.h"
 #include "server/extract/extractor.h"
 #include "test_volumes.h"
 
@@ -18,7 +19,10 @@ namespace {
 using testing::BlobsField;
 using testing::CayleyField;
 using testing::MakeHierarchy;
+using testing::MarchTet;
+using testing::MeshTriangles;
 using testing::SphereField;
+using testing::TriKey;
 
 const GridToWorld kGrid{};  // world == grid coordinates
 
@@ -187,19 +191,8 @@ TEST(Extract, UnorderedTraversalViolatesPaintersOrder) {
   EXPECT_GT(violations, 10);
 }
 
-using TriKey = std::array<float, 10>;  // surface, then the 3 positions sorted
-
-TriKey MakeKey(int surface, std::array<glm::vec3, 3> p) {
-  std::sort(p.begin(), p.end(),
-            [](auto& a, auto& b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); });
-  return {float(surface), p[0].x, p[0].y, p[0].z, p[1].x, p[1].y, p[1].z, p[2].x, p[2].y, p[2].z};
-}
-
 // Brute-force marching tetrahedra over the reflected Kuhn triangulation, built directly from
-// the grid (each unit cube split around the diagonal through its all-even corner), with the
-// same conventions: a vertex is inside when f >= iso, crossings interpolated (parameter in
-// double, point in single precision) from the lexicographically smaller endpoint, quads split
-// along the shorter diagonal (ties by position).
+// the grid (each unit cube split around the diagonal through its all-even corner).
 std::multiset<TriKey> BruteForce(const Hierarchy& h, const std::vector<float>& iso) {
   std::multiset<TriKey> tris;
   const int n = h.n();
@@ -219,39 +212,7 @@ std::multiset<TriKey> BruteForce(const Hierarchy& h, const std::vector<float>& i
           }
           float f[4];
           for (int i = 0; i < 4; ++i) f[i] = h.sample(v[i].x, v[i].y, v[i].z);
-          for (size_t s = 0; s < iso.size(); ++s) {
-            auto cross = [&](int i, int j) {
-              glm::ivec3 a = v[i], b = v[j];
-              float fa = f[i], fb = f[j];
-              if (std::tie(b.x, b.y, b.z) < std::tie(a.x, a.y, a.z))
-                std::swap(a, b), std::swap(fa, fb);
-              const float t = float((double(iso[s]) - fa) / (double(fb) - fa));
-              return glm::vec3(a) + t * glm::vec3(b - a);
-            };
-            std::vector<int> in, out;
-            for (int i = 0; i < 4; ++i) (f[i] >= iso[s] ? in : out).push_back(i);
-            if (in.empty() || out.empty()) continue;
-            if (in.size() != 2) {
-              const int lone = in.size() == 1 ? in[0] : out[0];
-              const auto& rest = in.size() == 1 ? out : in;
-              tris.insert(MakeKey(
-                  int(s), {cross(lone, rest[0]), cross(lone, rest[1]), cross(lone, rest[2])}));
-              continue;
-            }
-            glm::vec3 q[4] = {cross(in[0], out[0]), cross(in[0], out[1]), cross(in[1], out[1]),
-                              cross(in[1], out[0])};
-            const glm::dvec3 p0(q[0]), p1(q[1]), p2(q[2]), p3(q[3]);
-            const double d02 = glm::dot(p2 - p0, p2 - p0), d13 = glm::dot(p3 - p1, p3 - p1);
-            auto less = [](const glm::vec3& a, const glm::vec3& b) {
-              return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
-            };
-            bool along13 = d13 < d02;
-            if (d02 == d13)
-              along13 = less(less(q[1], q[3]) ? q[1] : q[3], less(q[0], q[2]) ? q[0] : q[2]);
-            if (along13) std::rotate(q, q + 1, q + 4);
-            tris.insert(MakeKey(int(s), {q[0], q[1], q[2]}));
-            tris.insert(MakeKey(int(s), {q[0], q[2], q[3]}));
-          }
+          MarchTet(v, f, iso, &tris);
         } while (std::next_permutation(axes, axes + 3));
       }
   return tris;
@@ -262,16 +223,7 @@ TEST(Extract, EpsZeroEqualsBruteForceMarchingTetrahedra) {
     const auto h = MakeHierarchy(4, field);
     const std::vector<float> iso = {-0.4f, 0.1f, 0.3f, 0.6f};  // ascending: surface == index
     const auto res = RunExtract(*h, Request(iso, 0.0, {40, -30, 20}));
-    const OrderedMesh& m = res.mesh;
-    std::multiset<TriKey> ours;
-    for (size_t t = 0; t < m.triangle_count(); ++t) {
-      std::array<glm::vec3, 3> p;
-      for (int i = 0; i < 3; ++i) {
-        const float* q = &m.positions[3 * size_t(m.triangles[3 * t + i])];
-        p[i] = {q[0], q[1], q[2]};
-      }
-      ours.insert(MakeKey(m.surface[t], p));
-    }
+    const std::multiset<TriKey> ours = MeshTriangles(res.mesh);
     const auto brute = BruteForce(*h, iso);
     EXPECT_GT(brute.size(), 1000u);
     EXPECT_EQ(ours.size(), brute.size());
