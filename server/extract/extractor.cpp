@@ -98,19 +98,10 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.blocks = &BlockTables::Get();
   c.block_level = 3 * c.k - kBlockDepth;
   c.cases = &MarchingTets::Get();
-  static const std::array<uint8_t, kNumTetClasses> negative = [&] {
-    std::array<uint8_t, kNumTetClasses> out{};
-    for (int i = 0; i < kNumTetClasses; ++i) {
-      const auto& v = (*c.tables)[TetClass{uint8_t(i)}].vertex;
-      const glm::dmat3 e(glm::dvec3(v[1] - v[0]), glm::dvec3(v[2] - v[0]),
-                         glm::dvec3(v[3] - v[0]));
-      out[i] = glm::determinant(e) < 0;
-    }
-    return out;
-  }();  // a property of the reference classes: computed once, not per request
-  std::copy(negative.begin(), negative.end(), c.negative);
   for (int i = 0; i < kNumTetClasses; ++i) {
-    const auto& ni = (*c.tables)[TetClass{uint8_t(i)}].plane_normal_int;
+    const ReferenceTet& rt = (*c.tables)[TetClass{uint8_t(i)}];
+    c.negative[i] = rt.left_handed;
+    const auto& ni = rt.plane_normal_int;
     const glm::dvec3 n(ni[0], ni[1], ni[2]);
     c.plane_eye[i] = glm::dot(n, c.eye);
     c.ortho_child0_first[i] = glm::dot(n, c.dir) >= 0;  // eye on child 1's side of every plane

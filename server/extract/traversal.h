@@ -80,7 +80,7 @@ struct Context {
   const BlockTables* blocks = nullptr;
   int block_level = 0;  // 3k - 3: nodes refined here run the last three levels as one block
   const MarchingTets* cases = nullptr;
-  uint8_t negative[kNumTetClasses];  // 1: the class's canonical vertex order is left-handed
+  uint8_t negative[kNumTetClasses];  // ReferenceTet::left_handed, beside the other per-class data
   // Per class, against ReferenceTet::plane_normal_int: perspective, normal . eye (grid space),
   // so the eye's side of a plane through grid point x is an exact integer dot product and one
   // comparison; orthographic, whether child 0 is drawn first (the same for every node).

@@ -186,6 +186,7 @@ ReferenceTets::ReferenceTets() {
     }
     // Rows of E^-1 are the gradients of barycentric coordinates 1..3; lambda_0 = 1 - rest.
     const glm::dmat3 edges(p1 - p0, p2 - p0, p3 - p0);  // columns
+    t.left_handed = glm::determinant(edges) < 0;
     const glm::dmat3 inv_t = glm::transpose(glm::inverse(edges));
     const glm::dvec3 grad3 = inv_t[2];
     const glm::dvec3 grad0 = -(inv_t[0] + inv_t[1] + inv_t[2]);

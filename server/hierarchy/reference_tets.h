@@ -34,6 +34,9 @@ struct ReferenceTet {
   // extent, so every coordinate is 0, 1 or 2.
   std::array<glm::ivec3, 4> vertex;
   int level_mod3 = 0;  // 0: refinement edge is a cube diagonal, 1: a face diagonal, 2: a cube edge
+  // The canonical vertex order is left-handed: (v1 - v0, v2 - v0, v3 - v0) has a negative
+  // determinant, so faces wound by vertex order face the other way.
+  bool left_handed = false;
   // child[0] holds vertex[0], child[1] holds vertex[3]. child_point[c][i] says which of the
   // parent's 5 bisection points (0..3 vertices, 4 = refinement vertex) is the child's
   // canonical vertex i.
