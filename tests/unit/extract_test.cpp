@@ -382,6 +382,21 @@ TEST(Extract, BudgetMemoSkipsTheSearchForLaterViews) {
   EXPECT_GT(RunExtract(*h, new_iso).stats.budget_passes, 0);
 }
 
+// The output is reserved for the frame the budget search counted, not for the budget: a budget
+// of 2^24 triangles must not reserve ~400 MB for a frame of a few thousand.
+TEST(Extract, BudgetSearchReservesTheFrameNotTheBudget) {
+  const auto h = MakeHierarchy(5, BlobsField);
+  ExtractRequest r = Request({0.2f, 0.5f, 0.8f}, 0, {50, 50, 50});
+  r.budget = int64_t{1} << 24;
+  const auto res = RunExtract(*h, r);
+  EXPECT_EQ(res.stats.eps_used, 0.0);  // everything fits
+  const size_t t = res.mesh.triangle_count();
+  ASSERT_GT(t, 1000u);
+  EXPECT_LT(res.mesh.triangles.capacity(), 2 * 3 * t);
+  EXPECT_LT(res.mesh.surface.capacity(), 2 * t);
+  EXPECT_LT(res.mesh.positions.capacity(), 2 * 3 * (t / 2 + 1024));
+}
+
 TEST(Extract, WorldPositionsFollowSpacingAndOrigin) {
   const auto h = MakeHierarchy(4, SphereField);
   const GridToWorld xf{{-1, -2, -3}, {0.5, 0.25, 2.0}};
