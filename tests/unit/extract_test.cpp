@@ -5,10 +5,10 @@
 
 #include <algorithm>
 #include <glm/geometric.hpp>
-#include <map>
 #include <random>
 #include <set>
 
+#include "mesh_checks.h"
 #include "server/extract/extractor.h"
 #include "test_volumes.h"
 
@@ -17,6 +17,7 @@ namespace {
 
 using testing::BlobsField;
 using testing::CayleyField;
+using testing::ExpectWatertight;
 using testing::MakeHierarchy;
 using testing::SphereField;
 
@@ -35,24 +36,6 @@ ExtractResult RunExtract(const Hierarchy& h, const ExtractRequest& r,
   auto res = Extract(h, xf, r);
   EXPECT_TRUE(res.ok()) << res.status();
   return res.ok() ? std::move(*res) : ExtractResult{};
-}
-
-// Every edge of a surface is shared by exactly two of its triangles, with opposite
-// directions (consistently oriented, closed).
-void ExpectWatertight(const OrderedMesh& m, const std::string& what) {
-  std::map<std::tuple<int, uint32_t, uint32_t>, int> directed;
-  for (size_t t = 0; t < m.triangle_count(); ++t)
-    for (int e = 0; e < 3; ++e) {
-      const uint32_t a = m.triangles[3 * t + e], b = m.triangles[3 * t + (e + 1) % 3];
-      ++directed[{m.surface[t], a, b}];
-    }
-  size_t bad = 0;
-  for (const auto& [edge, count] : directed) {
-    const auto& [s, a, b] = edge;
-    auto back = directed.find({s, b, a});
-    if (count != 1 || back == directed.end() || back->second != 1) ++bad;
-  }
-  EXPECT_EQ(bad, 0u) << what << ": " << bad << " of " << directed.size() << " half-edges unmatched";
 }
 
 TEST(Extract, ClosedSurfacesAreWatertightAtSeveralEps) {
