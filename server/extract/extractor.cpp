@@ -198,6 +198,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
 
   double eps = r.eps;
   std::optional<double> remembered;
+  std::optional<int64_t> counted;  // triangles at eps, when the budget search measured them
   if (r.budget > 0 && r.budget_memo) remembered = r.budget_memo->Find(r.isovalues, r.budget);
   if (remembered) {
     eps = *remembered;
@@ -218,7 +219,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     arena.execute([&] {
       const double x_root = std::log(double(h.eta(half, half, half)) * 1.0001 + 1e-30);
       double x_hi = x_root;
-      double y_hi = std::log(double(std::max<int64_t>(count_at(std::exp(x_hi)), 1)));
+      int64_t count_hi = count_at(std::exp(x_hi));
+      double y_hi = std::log(double(std::max<int64_t>(count_hi, 1)));
       double x_lo = 0, y_lo = 0;
       bool have_lo = false;
       int last_moved = 0, repeats = 0;
@@ -239,14 +241,19 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
         repeats = moved == last_moved ? repeats + 1 : 0;
         last_moved = moved;
         if (moved > 0) {
-          x_hi = x, y_hi = std::log(double(std::max<int64_t>(count, 1)));
+          x_hi = x, count_hi = count, y_hi = std::log(double(std::max<int64_t>(count, 1)));
           if (repeats > 0 && have_lo) y_lo = target + 0.5 * (y_lo - target);  // Illinois
         } else {
           x_lo = x, y_lo = std::log(double(count)), have_lo = true;
           if (repeats > 0) y_hi = target + 0.5 * (y_hi - target);
         }
       }
-      eps = have_lo ? std::exp(x_hi) : (count_at(0.0) <= r.budget ? 0.0 : std::exp(x_hi));
+      eps = std::exp(x_hi);
+      if (!have_lo) {
+        const int64_t count_zero = count_at(0.0);
+        if (count_zero <= r.budget) eps = 0.0, count_hi = count_zero;
+      }
+      counted = count_hi;
     });
     st.budget_ms = Ms(t0);
     if (r.budget_memo) r.budget_memo->Store(r.isovalues, r.budget, eps);
@@ -275,10 +282,14 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   std::atomic<bool> cancelled{false};
   OrderedMesh& m = result.mesh;
   if (r.budget > 0) {
-    // The frame fits the budget: growing the arrays to it by doubling would copy what the join
-    // already copied (~1/3 of the join's time at 1 M triangles). Isosurface meshes have about
-    // half as many vertices as triangles. Untouched capacity costs no memory.
-    const size_t t = size_t(std::min<int64_t>(r.budget, int64_t{1} << 24));
+    // Reserving the frame's size up front saves growing the arrays by doubling, which would
+    // copy what the join already copied (~1/3 of the join's time at 1 M triangles). The budget
+    // search counted the frame at the chosen eps (clipping at the data box may add or drop a
+    // few triangles); sizing from that count, not the budget, keeps a large budget from
+    // reserving hundreds of MB of address space for a small frame. An eps from the memo comes
+    // with no count: the budget bounds the frame then. Isosurface meshes have about half as
+    // many vertices as triangles.
+    const size_t t = size_t(std::min<int64_t>(counted.value_or(r.budget), int64_t{1} << 24));
     m.triangles.reserve(3 * t);
     m.surface.reserve(t);
     m.positions.reserve(3 * (t / 2 + 1024));

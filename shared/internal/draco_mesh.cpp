@@ -14,6 +14,8 @@
 #include <limits>
 #include <memory>
 
+#include "shared/internal/varint.h"
+
 namespace isostream::internal {
 namespace {
 
@@ -22,21 +24,6 @@ namespace {
 // face and point counts as varints.
 constexpr size_t kDracoHeaderSize = 11;
 constexpr uint16_t kDracoMetadataFlag = 0x8000;
-
-bool ReadVarint32(const uint8_t** p, const uint8_t* end, uint32_t* value) {
-  uint64_t result = 0;
-  for (int shift = 0; shift < 35; shift += 7) {
-    if (*p == end) return false;
-    const uint8_t byte = *(*p)++;
-    result |= uint64_t{byte & 0x7fu} << shift;
-    if (!(byte & 0x80)) {
-      if (result > std::numeric_limits<uint32_t>::max()) return false;
-      *value = static_cast<uint32_t>(result);
-      return true;
-    }
-  }
-  return false;
-}
 
 int AddAttribute(draco::PointCloud* points, draco::GeometryAttribute::Type type, int components,
                  draco::DataType data_type, bool normalized, const void* values,
@@ -248,9 +235,8 @@ absl::Status ReadDracoSequentialCounts(const char* data, size_t size, uint32_t* 
   }
   const uint16_t flags = static_cast<uint16_t>(bytes[9] | (bytes[10] << 8));
   if (flags & kDracoMetadataFlag) return absl::DataLossError("Draco payload carries metadata");
-  const uint8_t* p = bytes + kDracoHeaderSize;
-  const uint8_t* end = bytes + size;
-  if (!ReadVarint32(&p, end, face_count) || !ReadVarint32(&p, end, point_count)) {
+  size_t at = kDracoHeaderSize;
+  if (!GetVarint32(bytes, size, &at, face_count) || !GetVarint32(bytes, size, &at, point_count)) {
     return absl::DataLossError("Draco payload ends inside its connectivity header");
   }
   return absl::OkStatus();

@@ -4,6 +4,7 @@
 #include <cstring>
 #include <vector>
 
+#include "shared/internal/varint.h"
 #include "shared/uninitialized_vector.h"
 
 namespace isostream::internal {
@@ -35,29 +36,6 @@ Token Tokenize(uint32_t v) {
   const uint32_t bits = width - 3;
   return {kDirectTokens + 4 * (width - 8) + ((v >> bits) & 3), bits,
           v & ((uint32_t{1} << bits) - 1)};
-}
-
-void PutVarint(uint32_t v, std::string* out) {
-  while (v >= 0x80) {
-    out->push_back(static_cast<char>(v | 0x80));
-    v >>= 7;
-  }
-  out->push_back(static_cast<char>(v));
-}
-
-bool GetVarint(const uint8_t* data, size_t size, size_t* at, uint32_t* value) {
-  uint64_t v = 0;
-  for (int shift = 0; shift < 35; shift += 7) {
-    if (*at >= size) return false;
-    const uint8_t byte = data[(*at)++];
-    v |= uint64_t{byte & 0x7fu} << shift;
-    if (!(byte & 0x80)) {
-      if (v > 0xffffffffu) return false;
-      *value = static_cast<uint32_t>(v);
-      return true;
-    }
-  }
-  return false;
 }
 
 // Token counts scaled to frequencies summing to kTotal, every token that occurs getting at
@@ -174,11 +152,11 @@ void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
 
   uint32_t freq[kMaxTokens] = {};
   Normalize(counts[0], alphabet, count, freq);
-  PutVarint(alphabet, out);
+  PutVarint32(alphabet, out);
   EncodeSymbol table[kMaxTokens];
   uint32_t start = 0;
   for (uint32_t t = 0; t < alphabet; ++t) {
-    PutVarint(freq[t], out);
+    PutVarint32(freq[t], out);
     EncodeSymbol& e = table[t];
     e.freq = freq[t];
     e.start = start;
@@ -226,22 +204,22 @@ void AppendSymbols(const uint32_t* symbols, size_t count, std::string* out) {
   }
   p -= 4 * kStates;
   std::memcpy(p, x, 4 * kStates);  // little-endian host
-  PutVarint(static_cast<uint32_t>(end - p), out);
+  PutVarint32(static_cast<uint32_t>(end - p), out);
   out->append(reinterpret_cast<const char*>(p), static_cast<size_t>(end - p));
-  PutVarint(static_cast<uint32_t>(extra_size), out);
+  PutVarint32(static_cast<uint32_t>(extra_size), out);
   out->append(reinterpret_cast<const char*>(extra.data()), extra_size);
 }
 
 bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32_t* symbols) {
   const auto* bytes = reinterpret_cast<const uint8_t*>(data);
   uint32_t alphabet = 0;
-  if (!GetVarint(bytes, size, at, &alphabet) || alphabet == 0 || alphabet > kMaxTokens) {
+  if (!GetVarint32(bytes, size, at, &alphabet) || alphabet == 0 || alphabet > kMaxTokens) {
     return false;
   }
   uint32_t freq[kMaxTokens], start[kMaxTokens];
   uint32_t sum = 0;
   for (uint32_t t = 0; t < alphabet; ++t) {
-    if (!GetVarint(bytes, size, at, &freq[t]) || freq[t] > kTotal) return false;
+    if (!GetVarint32(bytes, size, at, &freq[t]) || freq[t] > kTotal) return false;
     start[t] = sum;
     sum += freq[t];
     if (sum > kTotal) return false;
@@ -253,14 +231,14 @@ bool ReadSymbols(const char* data, size_t size, size_t* at, size_t count, uint32
   }
 
   uint32_t rans_size = 0, extra_size = 0;
-  if (!GetVarint(bytes, size, at, &rans_size) || rans_size < 4 * kStates ||
+  if (!GetVarint32(bytes, size, at, &rans_size) || rans_size < 4 * kStates ||
       rans_size > size - *at) {
     return false;
   }
   const uint8_t* p = bytes + *at;
   const uint8_t* rans_end = p + rans_size;
   *at += rans_size;
-  if (!GetVarint(bytes, size, at, &extra_size) || extra_size > size - *at) return false;
+  if (!GetVarint32(bytes, size, at, &extra_size) || extra_size > size - *at) return false;
   BitReader extra_bits(bytes + *at, extra_size);
   *at += extra_size;
 

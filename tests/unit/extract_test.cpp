@@ -5,11 +5,11 @@
 
 #include <algorithm>
 #include <glm/geometric.hpp>
-#include <map>
 #include <random>
 #include <set>
 
 #include "marching_reference.h"
+#include "mesh_checks.h"
 #include "server/extract/extractor.h"
 #include "test_volumes.h"
 
@@ -18,6 +18,7 @@ namespace {
 
 using testing::BlobsField;
 using testing::CayleyField;
+using testing::ExpectWatertight;
 using testing::MakeHierarchy;
 using testing::MarchTet;
 using testing::MeshTriangles;
@@ -39,24 +40,6 @@ ExtractResult RunExtract(const Hierarchy& h, const ExtractRequest& r,
   auto res = Extract(h, xf, r);
   EXPECT_TRUE(res.ok()) << res.status();
   return res.ok() ? std::move(*res) : ExtractResult{};
-}
-
-// Every edge of a surface is shared by exactly two of its triangles, with opposite
-// directions (consistently oriented, closed).
-void ExpectWatertight(const OrderedMesh& m, const std::string& what) {
-  std::map<std::tuple<int, uint32_t, uint32_t>, int> directed;
-  for (size_t t = 0; t < m.triangle_count(); ++t)
-    for (int e = 0; e < 3; ++e) {
-      const uint32_t a = m.triangles[3 * t + e], b = m.triangles[3 * t + (e + 1) % 3];
-      ++directed[{m.surface[t], a, b}];
-    }
-  size_t bad = 0;
-  for (const auto& [edge, count] : directed) {
-    const auto& [s, a, b] = edge;
-    auto back = directed.find({s, b, a});
-    if (count != 1 || back == directed.end() || back->second != 1) ++bad;
-  }
-  EXPECT_EQ(bad, 0u) << what << ": " << bad << " of " << directed.size() << " half-edges unmatched";
 }
 
 TEST(Extract, ClosedSurfacesAreWatertightAtSeveralEps) {
@@ -332,6 +315,21 @@ TEST(Extract, BudgetMemoSkipsTheSearchForLaterViews) {
   ExtractRequest new_iso = r;
   new_iso.isovalues = {0.5f};
   EXPECT_GT(RunExtract(*h, new_iso).stats.budget_passes, 0);
+}
+
+// The output is reserved for the frame the budget search counted, not for the budget: a budget
+// of 2^24 triangles must not reserve ~400 MB for a frame of a few thousand.
+TEST(Extract, BudgetSearchReservesTheFrameNotTheBudget) {
+  const auto h = MakeHierarchy(5, BlobsField);
+  ExtractRequest r = Request({0.2f, 0.5f, 0.8f}, 0, {50, 50, 50});
+  r.budget = int64_t{1} << 24;
+  const auto res = RunExtract(*h, r);
+  EXPECT_EQ(res.stats.eps_used, 0.0);  // everything fits
+  const size_t t = res.mesh.triangle_count();
+  ASSERT_GT(t, 1000u);
+  EXPECT_LT(res.mesh.triangles.capacity(), 2 * 3 * t);
+  EXPECT_LT(res.mesh.surface.capacity(), 2 * t);
+  EXPECT_LT(res.mesh.positions.capacity(), 2 * 3 * (t / 2 + 1024));
 }
 
 TEST(Extract, WorldPositionsFollowSpacingAndOrigin) {
