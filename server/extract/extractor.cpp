@@ -17,6 +17,7 @@
 #include <cmath>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
+#include <limits>
 #include <mutex>
 #include <numeric>
 #include <optional>
@@ -131,7 +132,8 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
       t.f[j] = c.F(v[j]);
     }
     const glm::dmat3 e(glm::dvec3(v[1] - v[0]), glm::dvec3(v[2] - v[0]), glm::dvec3(v[3] - v[0]));
-    const glm::dvec3 df(t.f[1] - t.f[0], t.f[2] - t.f[0], t.f[3] - t.f[0]);
+    // Differences in double: float ones overflow for samples near FLT_MAX.
+    const glm::dvec3 df(double(t.f[1]) - t.f[0], double(t.f[2]) - t.f[0], double(t.f[3]) - t.f[0]);
     t.g = glm::inverse(glm::transpose(e)) * df;  // the only direct solve: the six roots
     t.cls = tables.initial_class(i);
     t.level = 0;
@@ -217,20 +219,28 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       return CountAt(MakeContext(h, xf, r, e), limit);
     };
     arena.execute([&] {
-      const double x_root = std::log(double(h.eta(half, half, half)) * 1.0001 + 1e-30);
+      // The root's eta is +inf when the samples' wavelets pass the float range; every finite
+      // eta is below the largest float, which then brackets the search.
+      const double root_eta = std::min(double(h.eta(half, half, half)),
+                                       double(std::numeric_limits<float>::max()));
+      const double x_root = std::log(root_eta * 1.0001 + 1e-30);
       double x_hi = x_root;
       int64_t count_hi = count_at(std::exp(x_hi));
       double y_hi = std::log(double(std::max<int64_t>(count_hi, 1)));
       double x_lo = 0, y_lo = 0;
       bool have_lo = false;
       int last_moved = 0, repeats = 0;
+      double stride = 1;
       const double target = std::log(double(r.budget));
-      for (int i = 0; i < 60; ++i) {
+      // Even the coarsest mesh is over budget (a budget below a few dozen triangles, or etas
+      // forced to +inf): nothing fits, the coarsest is the answer.
+      const bool nothing_fits = count_hi > r.budget;
+      for (int i = 0; i < 60 && !nothing_fits; ++i) {
         if (have_lo && x_hi - x_lo < std::log(1.01)) break;
         double x;
         if (!have_lo) {
           if (x_hi < x_root - 35) break;  // fits at ~1e-15 of the root's eta: use eps = 0
-          x = std::max(x_hi - 1.05 * std::max(target - y_hi, 0.1), x_root - 36);
+          x = std::max(x_hi - stride * 1.05 * std::max(target - y_hi, 0.1), x_root - 36);
         } else {
           const double w = x_hi - x_lo;
           x = y_lo > y_hi ? x_lo + (y_lo - target) / (y_lo - y_hi) * w : x_lo + 0.5 * w;
@@ -241,6 +251,9 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
         repeats = moved == last_moved ? repeats + 1 : 0;
         last_moved = moved;
         if (moved > 0) {
+          // A count that did not move is a plateau (counts are steps, not a power law, where
+          // whole regions stop refining at once): stride over it, doubling.
+          stride = count == count_hi ? 2 * stride : 1;
           x_hi = x, count_hi = count, y_hi = std::log(double(std::max<int64_t>(count, 1)));
           if (repeats > 0 && have_lo) y_lo = target + 0.5 * (y_lo - target);  // Illinois
         } else {
@@ -249,7 +262,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
         }
       }
       eps = std::exp(x_hi);
-      if (!have_lo) {
+      if (!have_lo && !nothing_fits) {
         const int64_t count_zero = count_at(0.0);
         if (count_zero <= r.budget) eps = 0.0, count_hi = count_zero;
       }

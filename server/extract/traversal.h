@@ -18,6 +18,7 @@
 #include <cstdint>
 #include <glm/geometric.hpp>
 #include <glm/vec3.hpp>
+#include <limits>
 #include <vector>
 #ifdef __SSE2__
 #include <emmintrin.h>
@@ -531,7 +532,10 @@ class Traverser {
     }
     grad *= c_.inv_spacing;
     const float len2 = glm::dot(grad, grad);
-    const glm::vec3 nrm = len2 > 0 ? grad * (-1.0f / std::sqrt(len2)) : glm::vec3(0.0f);
+    const glm::vec3 nrm = len2 >= std::numeric_limits<float>::min() &&
+                                  len2 <= std::numeric_limits<float>::max()
+                              ? grad * (-1.0f / std::sqrt(len2))
+                              : NormalInDouble(t, a, b, tt, share);
     float* p = out_->positions.Extend(3);
     p[0] = pw.x, p[1] = pw.y, p[2] = pw.z;
     float* q = out_->normals.Extend(3);
@@ -541,24 +545,50 @@ class Traverser {
     return fresh;
   }
 
-  // Central differences of the samples at a grid point, one-sided on the cube's faces.
-  glm::vec3 GridGradient(const glm::ivec3& p) const {
+  // The normal when the float gradient's squared length leaves the normal float range (samples
+  // near FLT_MAX overflow it, tiny gradients underflow it): the same gradient in double.
+  // (0, 0, 0) only where the data are flat.
+  __attribute__((noinline)) glm::vec3 NormalInDouble(const Node& t, const glm::ivec3& a,
+                                                     const glm::ivec3& b, float tt,
+                                                     bool share) const {
+    glm::dvec3 g = t.g;
+    if (share) {
+      const glm::dvec3 ga = GridGradient<double>(a), gb = GridGradient<double>(b);
+      const glm::dvec3 mixed = glm::mix(ga, gb, double(tt));
+      g = glm::dot(mixed, mixed) != 0 ? mixed : LeafGradient(t);
+    }
+    g /= c_.xf.spacing;
+    const double scale = std::max({std::abs(g.x), std::abs(g.y), std::abs(g.z)});
+    if (!(scale > 0) || !std::isfinite(scale)) return glm::vec3(0.0f);
+    g /= scale;  // no overflow in the squares below
+    return glm::vec3(g * (-1.0 / std::sqrt(glm::dot(g, g))));
+  }
+
+  // Central differences of the samples at a grid point, one-sided on the cube's faces, in
+  // precision T (float on the hot path; double differences cannot overflow).
+  template <typename T = float>
+  glm::vec<3, T> GridGradient(const glm::ivec3& p) const {
     const uint64_t *ox = c_.value_bytes[0], *oy = c_.value_bytes[1], *oz = c_.value_bytes[2];
     const int last = c_.n - 1;
     if (unsigned(p.x - 1) < unsigned(last - 1) && unsigned(p.y - 1) < unsigned(last - 1) &&
         unsigned(p.z - 1) < unsigned(last - 1)) {  // inside the cube: both neighbours exist
       const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
-      return 0.5f * glm::vec3(c_.F(ox[p.x + 1] + y + z) - c_.F(ox[p.x - 1] + y + z),
-                              c_.F(x + oy[p.y + 1] + z) - c_.F(x + oy[p.y - 1] + z),
-                              c_.F(x + y + oz[p.z + 1]) - c_.F(x + y + oz[p.z - 1]));
+      return T(0.5) * glm::vec<3, T>(F<T>(ox[p.x + 1] + y + z) - F<T>(ox[p.x - 1] + y + z),
+                                     F<T>(x + oy[p.y + 1] + z) - F<T>(x + oy[p.y - 1] + z),
+                                     F<T>(x + y + oz[p.z + 1]) - F<T>(x + y + oz[p.z - 1]));
     }
     const glm::ivec3 lo(std::max(p.x - 1, 0), std::max(p.y - 1, 0), std::max(p.z - 1, 0));
     const glm::ivec3 hi(std::min(p.x + 1, last), std::min(p.y + 1, last), std::min(p.z + 1, last));
     const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
-    static constexpr float kInvSpan[3] = {0.0f, 1.0f, 0.5f};  // by hi - lo
-    return {(c_.F(ox[hi.x] + y + z) - c_.F(ox[lo.x] + y + z)) * kInvSpan[hi.x - lo.x],
-            (c_.F(x + oy[hi.y] + z) - c_.F(x + oy[lo.y] + z)) * kInvSpan[hi.y - lo.y],
-            (c_.F(x + y + oz[hi.z]) - c_.F(x + y + oz[lo.z])) * kInvSpan[hi.z - lo.z]};
+    static constexpr T kInvSpan[3] = {T(0), T(1), T(0.5)};  // by hi - lo
+    return {(F<T>(ox[hi.x] + y + z) - F<T>(ox[lo.x] + y + z)) * kInvSpan[hi.x - lo.x],
+            (F<T>(x + oy[hi.y] + z) - F<T>(x + oy[lo.y] + z)) * kInvSpan[hi.y - lo.y],
+            (F<T>(x + y + oz[hi.z]) - F<T>(x + y + oz[lo.z])) * kInvSpan[hi.z - lo.z]};
+  }
+
+  template <typename T>
+  T F(uint64_t value_offset) const {
+    return T(c_.F(value_offset));
   }
 
   // A leaf that straddles the data box: keep the part of the triangle inside it.

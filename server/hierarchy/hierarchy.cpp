@@ -50,6 +50,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <limits>
 
 #include "server/hierarchy/refinement_vertex.h"
 
@@ -70,6 +71,9 @@ void AdviseHugePages(void* data, size_t bytes) {
 // The smallest float >= v (v >= 0). For f >= +0 the next float up is the next bit pattern
 // (std::nextafter(f, INFINITY), without the library call).
 inline float RoundUp(double v) {
+  // Past the float range (wavelets of samples near FLT_MAX) the bound is +inf: such diamonds
+  // always refine, which is conservative. (Converting the double itself would be undefined.)
+  if (v > double(std::numeric_limits<float>::max())) return std::numeric_limits<float>::infinity();
   float f = static_cast<float>(v);
   if (static_cast<double>(f) < v) {
     uint32_t bits;

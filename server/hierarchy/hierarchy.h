@@ -129,7 +129,9 @@ struct HierarchyBuildOptions {
 };
 
 // Builds eta from the padded samples (taken over: the build uses their array as scratch).
-// Fails only on invalid samples. Allocates nothing large beyond the bricks it returns.
+// Fails only on invalid (non-finite) samples. Where finite samples near FLT_MAX give wavelets
+// past the float range, eta is stored as +inf: those tetrahedra always refine (conservative).
+// Allocates nothing large beyond the bricks it returns.
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options = {});
 

@@ -76,7 +76,7 @@ TEST(ExtractExtremeValues, OctahedraNearFltMaxAreFiniteClosedAndOnTheSurface) {
     for (size_t v = 0; v < m.vertex_count(); ++v) {
       const float* p = &m.positions[3 * v];
       const float* n = &m.normals[3 * v];
-      // Finite, though not unit length: see DISABLED_NormalsNearFltMaxAreUnitVectors.
+      // Unit length: see NormalsNearFltMaxAreUnitVectors.
       if (!std::isfinite(n[0]) || !std::isfinite(n[1]) || !std::isfinite(n[2])) ++normal_not_finite;
       if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
         ++not_finite;
@@ -102,13 +102,12 @@ TEST(ExtractExtremeValues, OctahedraNearFltMaxAreFiniteClosedAndOnTheSurface) {
   }
 }
 
-// DISABLED: fails today; to enable with a fix in NewVertex (server/extract/traversal.h). The
-// normal is the gradient normalised in float: |g|^2 overflows once |g| exceeds
-// sqrt(FLT_MAX) ~ 1.8e19 data units per world unit, and the normal comes out (0, 0, 0) (every
-// vertex of the octahedra, smooth or flat). Where the gradient itself passes FLT_MAX (the
-// central differences around the block below, or its leaves' gradients) the normal is NaN,
-// which ValidateMesh and EncodeChunk reject: such a frame can be neither written nor streamed.
-TEST(ExtractExtremeValues, DISABLED_NormalsNearFltMaxAreUnitVectors) {
+// The normal is the gradient normalised in float on the hot path: |g|^2 overflows once |g|
+// exceeds sqrt(FLT_MAX) ~ 1.8e19 data units per world unit (the octahedra), and the gradient
+// itself passes FLT_MAX in the central differences around the block below. Either would give
+// (0, 0, 0) or NaN normals, which ValidateMesh and EncodeChunk reject; the extractor redoes
+// such normals in double.
+TEST(ExtractExtremeValues, NormalsNearFltMaxAreUnitVectors) {
   const auto octahedra = testing::MakeHierarchy(kLevels, OctahedronField);
   // A 3^3 block of -3e38 in 3e38: every crossing edge spans the whole range.
   const auto block = testing::MakeHierarchy(3, [](double x, double y, double z) {
@@ -141,6 +140,36 @@ TEST(ExtractExtremeValues, DISABLED_NormalsNearFltMaxAreUnitVectors) {
       }
       EXPECT_EQ(bad, 0u) << what << ": of " << m.vertex_count() << " normals";
       EXPECT_TRUE(ValidateMesh(m).ok()) << what << ": " << ValidateMesh(m);
+    }
+}
+
+// Diamonds whose wavelets pass the float range store eta = +inf, the root's among them; the
+// budget search must still bracket eps with finite values and find a frame that fits.
+TEST(ExtractExtremeValues, BudgetSearchStaysFiniteWhenEtaOverflows) {
+  const auto octahedra = testing::MakeHierarchy(kLevels, OctahedronField);
+  const auto block = testing::MakeHierarchy(3, [](double x, double y, double z) {
+    return std::max({std::abs(x), std::abs(y), std::abs(z)}) < 0.3 ? -kExtreme : kExtreme;
+  });
+  ASSERT_TRUE(octahedra && block);
+  const int half = (octahedra->n() - 1) / 2;
+  ASSERT_TRUE(std::isinf(octahedra->eta(half, half, half)));
+  for (const Hierarchy* h : {octahedra.get(), block.get()})
+    for (int64_t budget : {50, 200, 1000}) {
+      ExtractRequest r;
+      r.isovalues = {h == block.get() ? 0.0f : -2e38f};
+      r.budget = budget;
+      r.view.eye = {3, -2, 5};
+      const auto res = Extract(*h, GridToWorld{}, r);
+      ASSERT_TRUE(res.ok()) << res.status();
+      const std::string what = std::string(h == block.get() ? "block" : "octahedra") +
+                               " budget " + std::to_string(budget);
+      EXPECT_TRUE(std::isfinite(res->stats.eps_used)) << what << ": " << res->stats.eps_used;
+      EXPECT_GT(res->stats.triangles, 0) << what;
+      EXPECT_LT(res->stats.budget_passes, 60) << what;  // the search ended, not its pass cap
+      // Over budget only where even the coarsest mesh is: seen on the first pass.
+      if (res->stats.triangles > budget) {
+        EXPECT_EQ(res->stats.budget_passes, 1) << what;
+      }
     }
 }
 
