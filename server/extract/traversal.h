@@ -285,6 +285,7 @@ class Traverser {
     unsigned above[kMaxSurfaces];  // points with f >= iso[s], for s in [s0, s1)
     int s0, s1;
     unsigned crossing;  // bit j: the finest tetrahedron at heap position 8 + j crosses
+    unsigned child1_first;  // bit p: position p draws its child 1 first
   };
 
   int64_t Block(const Node& root, int64_t* visited) {
@@ -307,6 +308,15 @@ class Traverser {
       fr.crossing |= CrossingLeaves(leaf_corners, m);
     }
     if (fr.crossing == 0) return 0;
+    // All 7 separating-plane sides up front: independent of each other, so they overlap
+    // instead of each waiting on the walk that reaches its tetrahedron.
+    fr.child1_first = 0;
+    if (c_.ordered)
+      for (unsigned at = 1; at < kBlockNodes / 2; ++at) {
+        const BlockNode& b = fr.nodes[at];
+        fr.child1_first |=
+            unsigned(!ChildZeroFirst(c_, (*c_.tables)[b.cls], b.cls, fr.p[b.refinement])) << at;
+      }
     return BlockVisit<0>(fr, 1, visited);
   }
 
@@ -358,8 +368,7 @@ class Traverser {
         if (c_.eps > 0 && c_.Eta(c_.EtaOffset(fr.p[b.refinement])) < c_.eps)
           return BlockLeaf(fr, at, kDepth);
       }
-      const unsigned far =
-          2 * at + (ChildZeroFirst(c_, (*c_.tables)[b.cls], b.cls, fr.p[b.refinement]) ? 0 : 1);
+      const unsigned far = 2 * at + ((fr.child1_first >> at) & 1);
       const int64_t n = BlockVisit<kDepth + 1>(fr, far, visited);
       return n + BlockVisit<kDepth + 1>(fr, far ^ 1, visited);
     }
