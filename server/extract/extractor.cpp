@@ -140,6 +140,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
     const extract_internal::PackedPoint x = extract_internal::Pack(RefinementPoint(v));
     t.xref_value = c.ValueOffset(x);
     t.xref_eta = c.EtaOffset(x);
+    t.child0_first = extract_internal::ChildZeroFirst(c, tables[t.cls], t.cls, x);
     items.push_back(t);
   }
   constexpr size_t kTargetSubtrees = 256;

@@ -55,6 +55,9 @@ struct Node {
   // level).
   uint64_t xref_value, xref_eta;
   TetClass cls;
+  // Which child Bisect draws first, decided when the node is made: off the chain from a node
+  // to its far child, where the plane test would delay every step (unused at the finest level).
+  bool child0_first;
   int level;
 };
 
@@ -169,7 +172,7 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
   const PackedPoint points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
   const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
-  const bool child0_first = ChildZeroFirst(c, rt, t.cls, x);
+  const bool child0_first = t.child0_first;
   for (int ch = 0; ch < 2; ++ch) {
     Node& o = *((ch == 0) == child0_first ? first : second);
     const uint8_t* cp = rt.child_point[ch].data();
@@ -188,6 +191,7 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
       o.xref_eta = c.EtaOffset(ox);
       __builtin_prefetch(c.store + o.xref_value);
       __builtin_prefetch(c.store + o.xref_eta);
+      o.child0_first = ChildZeroFirst(c, (*c.tables)[o.cls], o.cls, ox);
     }
   }
 }
