@@ -40,6 +40,9 @@ struct ExtractRequest {
   DrawOrder order = DrawOrder::kBackToFront;
   NormalMode normals = NormalMode::kSmooth;
   int threads = 0;  // 0: all cores
+  // The last three levels of the tree run as table-driven blocks (traversal.h). Off refines
+  // them node by node: the same mesh byte for byte, slower; for tests and measurements.
+  bool blocks = true;
   // Optional, not owned: remembers budget -> eps for this hierarchy across requests.
   BudgetMemo* budget_memo = nullptr;
 };
@@ -49,7 +52,9 @@ struct ExtractStats {
   int64_t triangles = 0;
   std::array<int64_t, kMaxSurfaces> triangles_per_surface{};
   int64_t vertices = 0;
-  int64_t tets_visited = 0;  // nodes of the bisection tree touched by the emitting traversal
+  // Tetrahedra decided by the emitting traversal; a block enters only subtrees holding a
+  // crossing finest tetrahedron, so blocks decide fewer than node-by-node refinement.
+  int64_t tets_visited = 0;
   int64_t leaves = 0;        // leaf tetrahedra that produced triangles
   int subtrees = 0;          // units of parallel work
   int budget_passes = 0;     // count-only traversals run to find eps for a budget

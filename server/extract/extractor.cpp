@@ -83,7 +83,10 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
     c.iso[c.iso_count] = sorted[i].first;
     c.iso_surface[c.iso_count++] = uint8_t(sorted[i].second);
   }
-  c.eps = static_cast<float>(eps);
+  // An eps past the float range (the budget search's cap for etas of +inf) stops nowhere
+  // finite etas do not: +inf, written out (the conversion itself would be undefined).
+  c.eps = eps > double(std::numeric_limits<float>::max()) ? std::numeric_limits<float>::infinity()
+                                                          : static_cast<float>(eps);
   if (double(c.eps) < eps) c.eps = std::nextafter(c.eps, INFINITY);  // stop only if eta < eps
   c.ordered = r.order == DrawOrder::kBackToFront;
   c.orthographic = r.view.orthographic;
@@ -97,7 +100,7 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.inv_spacing = glm::vec3(1.0 / xf.spacing);
   c.tables = &ReferenceTets::Get();
   c.blocks = &BlockTables::Get();
-  c.block_level = 3 * c.k - kBlockDepth;
+  c.block_level = r.blocks ? 3 * c.k - kBlockDepth : -1;
   c.cases = &MarchingTets::Get();
   for (int i = 0; i < kNumTetClasses; ++i) {
     const ReferenceTet& rt = (*c.tables)[TetClass{uint8_t(i)}];
@@ -132,8 +135,12 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
       t.f[j] = c.F(v[j]);
     }
     const glm::dmat3 e(glm::dvec3(v[1] - v[0]), glm::dvec3(v[2] - v[0]), glm::dvec3(v[3] - v[0]));
-    // Differences in double: float ones overflow for samples near FLT_MAX.
-    const glm::dvec3 df(double(t.f[1]) - t.f[0], double(t.f[2]) - t.f[0], double(t.f[3]) - t.f[0]);
+    // Float differences as always; in double where they overflow (samples near FLT_MAX).
+    auto diff = [](float a, float b) {
+      const float d = a - b;
+      return std::isfinite(d) ? double(d) : double(a) - double(b);
+    };
+    const glm::dvec3 df(diff(t.f[1], t.f[0]), diff(t.f[2], t.f[0]), diff(t.f[3], t.f[0]));
     t.g = glm::inverse(glm::transpose(e)) * df;  // the only direct solve: the six roots
     t.cls = tables.initial_class(i);
     t.level = 0;
@@ -267,7 +274,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
         const int64_t count_zero = count_at(0.0);
         if (count_zero <= r.budget) eps = 0.0, count_hi = count_zero;
       }
-      counted = count_hi;
+      if (count_hi <= r.budget) counted = count_hi;  // else a sentinel past the search's limit
     });
     st.budget_ms = Ms(t0);
     if (r.budget_memo) r.budget_memo->Store(r.isovalues, r.budget, eps);

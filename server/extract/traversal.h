@@ -20,10 +20,8 @@
 #include <glm/vec3.hpp>
 #include <limits>
 #include <vector>
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
 
+#include "server/extract/block_sets.h"
 #include "server/extract/edge_vertex_table.h"
 #include "server/extract/extract_request.h"
 #include "server/extract/marching_tets.h"
@@ -83,6 +81,7 @@ struct Context {
   const ReferenceTets* tables = nullptr;
   const BlockTables* blocks = nullptr;
   int block_level = 0;  // 3k - 3: nodes refined here run the last three levels as one block
+                        // (-1: none)
   const MarchingTets* cases = nullptr;
   uint8_t negative[kNumTetClasses];  // ReferenceTet::left_handed, beside the other per-class data
   // Per class, against ReferenceTet::plane_normal_int: perspective, normal . eye (grid space),
@@ -324,38 +323,6 @@ class Traverser {
     return BlockVisit<0>(fr, 1, visited);
   }
 
-  // Bit i: f[i] >= iso, for the block's 10 points.
-  static unsigned AbovePoints(const float* f, float iso) {
-#ifdef __SSE2__
-    const __m128 v = _mm_set1_ps(iso);
-    const unsigned lo = unsigned(_mm_movemask_ps(_mm_cmpge_ps(_mm_loadu_ps(f), v)));
-    const unsigned mid = unsigned(_mm_movemask_ps(_mm_cmpge_ps(_mm_loadu_ps(f + 4), v)));
-    return lo | mid << 4 | unsigned(f[8] >= iso) << 8 | unsigned(f[9] >= iso) << 9;
-#else
-    unsigned m = 0;
-    for (int i = 0; i < kBlockPoints; ++i) m |= unsigned(f[i] >= iso) << i;
-    return m;
-#endif
-  }
-
-  // Bit j: the finest tetrahedron j (corner sets `leaf_corners`) has corners on both sides.
-  static unsigned CrossingLeaves(const uint16_t* leaf_corners, unsigned above) {
-#ifdef __SSE2__
-    const __m128i corners = _mm_load_si128(reinterpret_cast<const __m128i*>(leaf_corners));
-    const __m128i x = _mm_and_si128(corners, _mm_set1_epi16(short(above)));
-    const __m128i one_side =
-        _mm_or_si128(_mm_cmpeq_epi16(x, _mm_setzero_si128()), _mm_cmpeq_epi16(x, corners));
-    return ~unsigned(_mm_movemask_epi8(_mm_packs_epi16(one_side, one_side))) & 0xffu;
-#else
-    unsigned crossing = 0;
-    for (int j = 0; j < 8; ++j) {
-      const unsigned x = above & leaf_corners[j];
-      crossing |= unsigned(x != 0 && x != leaf_corners[j]) << j;
-    }
-    return crossing;
-#endif
-  }
-
   template <int kDepth>
   int64_t BlockVisit(const BlockFrame& fr, unsigned at, int64_t* visited) {
     if constexpr (kDepth == kBlockDepth) {
@@ -559,16 +526,19 @@ class Traverser {
   }
 
   // The normal when the float gradient's squared length leaves the normal float range (samples
-  // near FLT_MAX overflow it, tiny gradients underflow it): the same gradient in double.
+  // near FLT_MAX overflow it; tiny gradients, below ~1e-19 per world unit, underflow it): the
+  // same gradient in double.
   // (0, 0, 0) only where the data are flat.
   __attribute__((noinline)) glm::vec3 NormalInDouble(const Node& t, const glm::ivec3& a,
                                                      const glm::ivec3& b, float tt,
                                                      bool share) const {
-    glm::dvec3 g = t.g;
+    glm::dvec3 g;
     if (share) {
       const glm::dvec3 ga = GridGradient<double>(a), gb = GridGradient<double>(b);
       const glm::dvec3 mixed = glm::mix(ga, gb, double(tt));
       g = glm::dot(mixed, mixed) != 0 ? mixed : LeafGradient(t);
+    } else {
+      g = t.g;  // set for every leaf when normals are flat (a block leaf's only then)
     }
     g /= c_.xf.spacing;
     const double scale = std::max({std::abs(g.x), std::abs(g.y), std::abs(g.z)});

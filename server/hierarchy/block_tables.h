@@ -45,7 +45,9 @@ class BlockTables {
  private:
   BlockTables();
   std::array<std::array<BlockNode, kBlockNodes>, kNumTetClasses> nodes_{};
+  // One 16-byte row per class: the traversal loads a row as one SSE2 register.
   alignas(16) std::array<std::array<uint16_t, kBlockNodes / 2>, kNumTetClasses> leaf_corners_{};
+  static_assert(sizeof(leaf_corners_[0]) == 16, "a row of finest corner sets is one SSE2 load");
 };
 
 }  // namespace isostream

@@ -1,0 +1,110 @@
+// Blocks (the last three levels decided on bit sets, traversal.h) against refining the same
+// levels node by node: the whole mesh, byte for byte, over the paths that differ (eps 0 and
+// eps > 0 with stops inside blocks, eps equal to stored etas, perspective from outside and
+// inside, orthographic, unordered, smooth and flat normals, a data box smaller than the cube);
+// and the SSE2 bit-set arithmetic against its scalar definition.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <string>
+
+#include "server/extract/block_sets.h"
+#include "server/extract/extractor.h"
+#include "test_volumes.h"
+
+namespace isostream {
+namespace {
+
+using testing::BlobsField;
+using testing::CayleyField;
+
+struct Case {
+  HierarchyPtr h;
+  std::vector<float> iso;
+  std::string name;
+};
+
+std::vector<Case> Volumes() {
+  std::vector<Case> v;
+  v.push_back({testing::MakeHierarchy(4, CayleyField), {-0.3f, 0.05f, 0.4f}, "cayley 17^3"});
+  v.push_back({testing::MakeHierarchy(5, BlobsField), {0.2f, 0.5f, 0.8f}, "blobs 33^3"});
+  // Data box 13 x 17 x 11 in a 17^3 cube: blocks straddling it fall back to node by node.
+  PaddedSamples s = testing::MakeSamples(4, CayleyField);
+  s.data_dims = {13, 17, 11};
+  auto clipped = BuildHierarchy(std::move(s));
+  v.push_back({clipped.ok() ? *clipped : nullptr, {-0.3f, 0.05f, 0.4f}, "cayley clipped"});
+  return v;
+}
+
+TEST(ExtractBlocks, SameMeshByteForByteAsNodeByNode) {
+  for (const Case& vol : Volumes()) {
+    ASSERT_NE(vol.h, nullptr) << vol.name;
+    const Hierarchy& h = *vol.h;
+    const int half = (h.n() - 1) / 2;
+    // eps 0, a fraction of the root's eta, and etas stored at grid points (refinement vertices
+    // of the finest levels and above), where eta < eps and eta >= eps part exactly.
+    std::vector<double> eps = {0.0, 1e-2 * h.eta(half, half, half)};
+    for (const glm::ivec3 p : {glm::ivec3(1, 1, 1), glm::ivec3(2, 3, 5), glm::ivec3(6, 5, 3),
+                               glm::ivec3(4, 4, 2), glm::ivec3(5, 7, 9)})
+      if (h.eta(p.x, p.y, p.z) > 0) eps.push_back(h.eta(p.x, p.y, p.z));
+    ASSERT_GE(eps.size(), 5u) << vol.name;
+    int compared = 0;
+    for (double e : eps)
+      for (int view = 0; view < 4; ++view)
+        for (NormalMode normals : {NormalMode::kSmooth, NormalMode::kFlat}) {
+          ExtractRequest r;
+          r.isovalues = vol.iso;
+          r.eps = e;
+          r.normals = normals;
+          if (view == 0) r.view.eye = {-7.0, 30.0, 11.0};            // outside
+          if (view == 1) r.view.eye = {half + 0.3, half - 0.2, 1.7};  // inside
+          if (view == 2) r.view = {true, {}, {0.3, -1.0, 0.6}};       // orthographic
+          if (view == 3) r.order = DrawOrder::kNone;
+          const std::string what = vol.name + " eps " + std::to_string(e) + " view " +
+                                   std::to_string(view) +
+                                   (normals == NormalMode::kFlat ? " flat" : " smooth");
+          ExtractRequest node_by_node = r;
+          node_by_node.blocks = false;
+          const auto a = Extract(h, GridToWorld{}, r);
+          const auto b = Extract(h, GridToWorld{}, node_by_node);
+          ASSERT_TRUE(a.ok() && b.ok()) << what;
+          EXPECT_GT(a->mesh.triangle_count(), 0u) << what;
+          EXPECT_EQ(a->mesh.triangles, b->mesh.triangles) << what;
+          EXPECT_EQ(a->mesh.surface, b->mesh.surface) << what;
+          EXPECT_EQ(a->mesh.positions, b->mesh.positions) << what;
+          EXPECT_EQ(a->mesh.normals, b->mesh.normals) << what;
+          ++compared;
+        }
+    EXPECT_GE(compared, 40) << vol.name;
+  }
+}
+
+TEST(ExtractBlocks, BitSetsMatchTheirScalarDefinition) {
+  const ReferenceTets& tets = ReferenceTets::Get();
+  const BlockTables& blocks = BlockTables::Get();
+  int classes = 0;
+  for (int c = 0; c < kNumTetClasses; ++c) {
+    const TetClass cls{static_cast<uint8_t>(c)};
+    if (tets[cls].level_mod3 != 0) continue;
+    ++classes;
+    for (unsigned above = 0; above < (1u << kBlockPoints); ++above)
+      ASSERT_EQ(extract_internal::CrossingLeaves(blocks.leaf_corners(cls), above),
+                extract_internal::CrossingLeavesScalar(blocks.leaf_corners(cls), above))
+          << "class " << c << " points above " << above;
+  }
+  EXPECT_EQ(classes, 24);
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> pick(-3, 3);
+  const float specials[] = {-INFINITY, INFINITY, NAN, -0.0f, 0.0f};
+  for (int trial = 0; trial < 20000; ++trial) {
+    float f[kBlockPoints];
+    for (float& v : f) v = float(pick(rng));  // many ties with the isovalue
+    if (trial % 4 == 0) f[trial % kBlockPoints] = specials[trial % 5];
+    const float iso = trial % 7 == 0 ? specials[trial % 5] : float(pick(rng));
+    ASSERT_EQ(extract_internal::AbovePoints(f, iso), extract_internal::AbovePointsScalar(f, iso))
+        << "trial " << trial;
+  }
+}
+
+}  // namespace
+}  // namespace isostream
