@@ -251,7 +251,8 @@ class Traverser {
       int first, last;
       switch (Decide(c_, *cur, &first, &last)) {
         case Decision::kRefine:
-          if (cur->level == c_.block_level && (!c_.clip || InsideDataBox(*cur))) {
+          if (cur->level == c_.block_level && (!c_.clip || InsideDataBox(*cur)) &&
+              BlockPays(*cur)) {
             triangles += Block(*cur, &visited);
             if (!kEmit && triangles > limit) return triangles;
             break;
@@ -290,6 +291,21 @@ class Traverser {
     unsigned crossing;  // bit j: the finest tetrahedron at heap position 8 + j crosses
     unsigned child1_first;  // bit p: position p draws its child 1 first
   };
+
+  // A block's up-front work (6 samples, 7 plane sides) is ~2.5 bisections': with eps > 0 it
+  // runs only where both children refine too (eta at their refinement vertices >= eps).
+  // Unconditional blocks cost adaptive ~1 M-triangle frames 4-7% more instructions (most of
+  // those stop one level down); with this test they are within 1.3% of node by node (requiring
+  // all six inner tetrahedra to refine was worse).
+  bool BlockPays(const Node& root) const {
+    if (c_.eps <= 0) return true;
+    const BlockNode* nodes = (*c_.blocks)[root.cls];
+    for (int ch = 2; ch < 4; ++ch) {
+      const uint8_t* e = kBlockEdge[nodes[ch].refinement - 4];
+      if (c_.Eta(c_.EtaOffset((root.v[e[0]] + root.v[e[1]]) >> 1)) < c_.eps) return false;
+    }
+    return true;
+  }
 
   int64_t Block(const Node& root, int64_t* visited) {
     BlockFrame fr;
