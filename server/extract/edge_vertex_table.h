@@ -6,6 +6,7 @@
 // rehashing when half full; it never allocates per lookup.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -34,13 +35,12 @@ class EdgeVertexTable {
   // Returns the vertex stored for key, or kMissing after reserving the slot for `fresh`
   // (the caller then creates vertex `fresh`).
   uint32_t FindOrInsert(uint64_t key, uint32_t fresh) {
-    if (size_ >= grow_at_) Grow();
     size_t i = Hash(key);
     for (;;) {
       Slot& s = data_[i];
       if (s.generation != generation_) {
         s = Slot{key, fresh, generation_};
-        ++size_;
+        if (++size_ >= grow_at_) Grow();  // on inserts only: hits, most lookups, skip the test
         return kMissing;
       }
       if (s.key == key) return s.value;

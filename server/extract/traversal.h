@@ -567,15 +567,29 @@ class Traverser {
   // precision T (float on the hot path; double differences cannot overflow).
   template <typename T = float>
   glm::vec<3, T> GridGradient(const glm::ivec3& p) const {
+    return Interior(p) ? InteriorGradient<T>(p) : FaceGradient<T>(p);
+  }
+
+  // Both neighbours exist on every axis.
+  bool Interior(const glm::ivec3& p) const {
+    const unsigned span = unsigned(c_.n - 2);
+    return unsigned(p.x - 1) < span && unsigned(p.y - 1) < span && unsigned(p.z - 1) < span;
+  }
+
+  template <typename T = float>
+  glm::vec<3, T> InteriorGradient(const glm::ivec3& p) const {
+    const uint64_t *ox = c_.value_bytes[0], *oy = c_.value_bytes[1], *oz = c_.value_bytes[2];
+    const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
+    return T(0.5) * glm::vec<3, T>(F<T>(ox[p.x + 1] + y + z) - F<T>(ox[p.x - 1] + y + z),
+                                   F<T>(x + oy[p.y + 1] + z) - F<T>(x + oy[p.y - 1] + z),
+                                   F<T>(x + y + oz[p.z + 1]) - F<T>(x + y + oz[p.z - 1]));
+  }
+
+  // One-sided on the cube's faces. Out of line: rare, and it would crowd the vertex path.
+  template <typename T = float>
+  __attribute__((noinline)) glm::vec<3, T> FaceGradient(const glm::ivec3& p) const {
     const uint64_t *ox = c_.value_bytes[0], *oy = c_.value_bytes[1], *oz = c_.value_bytes[2];
     const int last = c_.n - 1;
-    if (unsigned(p.x - 1) < unsigned(last - 1) && unsigned(p.y - 1) < unsigned(last - 1) &&
-        unsigned(p.z - 1) < unsigned(last - 1)) {  // inside the cube: both neighbours exist
-      const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
-      return T(0.5) * glm::vec<3, T>(F<T>(ox[p.x + 1] + y + z) - F<T>(ox[p.x - 1] + y + z),
-                                     F<T>(x + oy[p.y + 1] + z) - F<T>(x + oy[p.y - 1] + z),
-                                     F<T>(x + y + oz[p.z + 1]) - F<T>(x + y + oz[p.z - 1]));
-    }
     const glm::ivec3 lo(std::max(p.x - 1, 0), std::max(p.y - 1, 0), std::max(p.z - 1, 0));
     const glm::ivec3 hi(std::min(p.x + 1, last), std::min(p.y + 1, last), std::min(p.z + 1, last));
     const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
