@@ -11,6 +11,8 @@
 //  4. leaf: marching tetrahedra for every isovalue crossing T, components ordered far to near
 //     by |iso - f_T(eye)| (§4.3: parallel planes, so the one farther from the eye in function
 //     value is farther along every ray that crosses both).
+// The last three levels (below 3k - 3) run as table-driven blocks with the same leaves, order
+// and arithmetic (Block; ExtractRequest::blocks turns them off for comparison).
 #pragma once
 
 #include <algorithm>
@@ -543,8 +545,7 @@ class Traverser {
 
   // The normal when the float gradient's squared length leaves the normal float range (samples
   // near FLT_MAX overflow it; tiny gradients, below ~1e-19 per world unit, underflow it): the
-  // same gradient in double.
-  // (0, 0, 0) only where the data are flat.
+  // same gradient in double, (0, 0, 0) only where the data are flat.
   __attribute__((noinline)) glm::vec3 NormalInDouble(const Node& t, const glm::ivec3& a,
                                                      const glm::ivec3& b, float tt,
                                                      bool share) const {
