@@ -55,9 +55,9 @@ struct ExtractStats {
   // Tetrahedra decided by the emitting traversal; a block enters only subtrees holding a
   // crossing finest tetrahedron, so blocks decide fewer than node-by-node refinement.
   int64_t tets_visited = 0;
-  int64_t leaves = 0;        // leaf tetrahedra that produced triangles
-  int subtrees = 0;          // units of parallel work
-  int budget_passes = 0;     // count-only traversals run to find eps for a budget
+  int64_t leaves = 0;     // leaf tetrahedra that produced triangles
+  int subtrees = 0;       // units of parallel work
+  int budget_passes = 0;  // count-only traversals run to find eps for a budget
   double budget_ms = 0, split_ms = 0, extract_ms = 0, join_ms = 0, total_ms = 0;
 };
 

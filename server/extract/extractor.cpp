@@ -229,8 +229,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     arena.execute([&] {
       // The root's eta is +inf when the samples' wavelets pass the float range; every finite
       // eta is below the largest float, which then brackets the search.
-      const double root_eta = std::min(double(h.eta(half, half, half)),
-                                       double(std::numeric_limits<float>::max()));
+      const double root_eta =
+          std::min(double(h.eta(half, half, half)), double(std::numeric_limits<float>::max()));
       const double x_root = std::log(root_eta * 1.0001 + 1e-30);
       double x_hi = x_root;
       int64_t count_hi = count_at(std::exp(x_hi));

@@ -60,7 +60,8 @@ BlockTables::BlockTables() {
         for (int i = 0; i < 4; ++i) corners[2 * p + ch][i] = points[rt.child_point[ch][i]];
       }
     }
-    for (int j = 0; j < kBlockNodes / 2; ++j) leaf_corners_[c][j] = nodes[kBlockNodes / 2 + j].corners;
+    for (int j = 0; j < kBlockNodes / 2; ++j)
+      leaf_corners_[c][j] = nodes[kBlockNodes / 2 + j].corners;
     for (int p = kBlockNodes - 1; p >= 1; --p) {
       nodes[p].span |= nodes[p].corners;
       if (p > 1) nodes[p / 2].span |= nodes[p].span;

@@ -12,8 +12,8 @@ using Points = std::array<glm::ivec3, 4>;
 
 int64_t SixVolume(const Points& v) {
   const glm::i64vec3 a(v[1] - v[0]), b(v[2] - v[0]), c(v[3] - v[0]);
-  const int64_t d = a.x * (b.y * c.z - b.z * c.y) - a.y * (b.x * c.z - b.z * c.x) +
-                    a.z * (b.x * c.y - b.y * c.x);
+  const int64_t d =
+      a.x * (b.y * c.z - b.z * c.y) - a.y * (b.x * c.z - b.z * c.x) + a.z * (b.x * c.y - b.y * c.x);
   return d < 0 ? -d : d;
 }
 
@@ -32,7 +32,8 @@ TEST(BlockTables, PositionsMatchBisectionOnCoordinates) {
     // Scale 8 keeps three levels of midpoints integral.
     std::array<glm::ivec3, kBlockPoints> local;
     for (int i = 0; i < 4; ++i) local[i] = tets[cls].vertex[i] * 8;
-    for (int e = 0; e < 6; ++e) local[4 + e] = (local[kBlockEdge[e][0]] + local[kBlockEdge[e][1]]) / 2;
+    for (int e = 0; e < 6; ++e)
+      local[4 + e] = (local[kBlockEdge[e][0]] + local[kBlockEdge[e][1]]) / 2;
     std::array<Points, kBlockNodes> pos;
     std::array<TetClass, kBlockNodes> pos_cls;
     for (int i = 0; i < 4; ++i) pos[1][i] = local[i];

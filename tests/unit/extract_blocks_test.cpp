@@ -56,7 +56,7 @@ TEST(ExtractBlocks, SameMeshByteForByteAsNodeByNode) {
           r.isovalues = vol.iso;
           r.eps = e;
           r.normals = normals;
-          if (view == 0) r.view.eye = {-7.0, 30.0, 11.0};            // outside
+          if (view == 0) r.view.eye = {-7.0, 30.0, 11.0};             // outside
           if (view == 1) r.view.eye = {half + 0.3, half - 0.2, 1.7};  // inside
           if (view == 2) r.view = {true, {}, {0.3, -1.0, 0.6}};       // orthographic
           if (view == 3) r.order = DrawOrder::kNone;

@@ -187,8 +187,8 @@ TEST(ExtractExtremeValues, BudgetSearchStaysFiniteWhenEtaOverflows) {
       r.view.eye = {3, -2, 5};
       const auto res = Extract(*h, GridToWorld{}, r);
       ASSERT_TRUE(res.ok()) << res.status();
-      const std::string what = std::string(h == block.get() ? "block" : "octahedra") +
-                               " budget " + std::to_string(budget);
+      const std::string what = std::string(h == block.get() ? "block" : "octahedra") + " budget " +
+                               std::to_string(budget);
       EXPECT_TRUE(std::isfinite(res->stats.eps_used)) << what << ": " << res->stats.eps_used;
       EXPECT_GT(res->stats.triangles, 0) << what;
       // Plateaus of the count over decades of eps are strided (without: the 60-pass cap).

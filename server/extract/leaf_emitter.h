@@ -1,0 +1,335 @@
+// Leaf output of the traversal: marching tetrahedra on a leaf for each isovalue crossing it
+// (components ordered far to near, §4.3), vertices shared per surface by edge key (each edge
+// crossing computed once, Kipfer & Westermann), smooth normals from central differences,
+// winding from the case table, and clipping at the data box. Private to server/extract.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+#include <limits>
+
+#include "server/extract/edge_vertex_table.h"
+#include "server/extract/subtree_mesh.h"
+#include "server/extract/tree_node.h"
+
+namespace isostream::extract_internal {
+
+// Integer planes of a subtree root's faces, to recognise edges that lie on them.
+struct RootFaces {
+  glm::i64vec3 normal[4];
+  int64_t offset2[4];  // twice the plane offset: tested against doubled midpoints
+  static int64_t Dot(const glm::i64vec3& a, const glm::i64vec3& b) {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+  }
+  explicit RootFaces(const TetVertices& v) {
+    for (int i = 0; i < 4; ++i) {
+      const glm::i64vec3 a(v[(i + 1) % 4]), b(v[(i + 2) % 4]), c(v[(i + 3) % 4]);
+      const glm::i64vec3 u = b - a, w = c - a;
+      normal[i] = {u.y * w.z - u.z * w.y, u.z * w.x - u.x * w.z, u.x * w.y - u.y * w.x};
+      offset2[i] = 2 * Dot(normal[i], a);
+    }
+  }
+  // `doubled_mid` = a + b for an edge (a, b) inside the root. The root is convex, so the
+  // edge's midpoint lies on a face plane only if both ends do.
+  bool EdgeOnFace(const glm::ivec3& doubled_mid) const {
+    const glm::i64vec3 m(doubled_mid);
+    for (int i = 0; i < 4; ++i)
+      if (Dot(normal[i], m) == offset2[i]) return true;
+    return false;
+  }
+};
+
+// Key of (edge, surface): the edge's doubled midpoint (packed). Leaves of the adaptive mesh
+// form a conforming tetrahedral mesh (saturated eta: no hanging node), where two distinct
+// edges never share an interior point, so the midpoint alone names the edge. Symmetric in the
+// endpoints; 3 fields of 21 bits leave the top bit clear, and the surface goes below.
+inline uint64_t EdgeKey(PackedPoint mid2, int s) { return (mid2 << 4) | uint64_t(s); }
+
+// Emits the leaves of one subtree into `out` (kEmit), or only counts their triangles.
+template <bool kEmit>
+class LeafEmitter {
+ public:
+  using GradientFn = glm::dvec3 (*)(const void* state);
+
+  LeafEmitter(const Context& c, EdgeVertexTable* table, SubtreeMesh* out)
+      : c_(c), table_(table), out_(out) {}
+
+  // A new subtree: vertices on its root's faces are the ones the join may merge.
+  void BeginSubtree(const Node& root) {
+    faces_ =
+        RootFaces({Unpack(root.v[0]), Unpack(root.v[1]), Unpack(root.v[2]), Unpack(root.v[3])});
+    if (kEmit) table_->Reset();
+  }
+
+  // Marching tetrahedra on leaf t for the sorted isovalues [first, last) crossing it, components
+  // far to near. A leaf whose node carries no gradient (a block's, with smooth normals) passes
+  // how to derive it; that is read only to order several surfaces or when central differences
+  // vanish, so an indirect call is cheap enough.
+  int Leaf(const Node& t, int first, int last, GradientFn lazy = nullptr,
+           const void* lazy_state = nullptr) {
+    lazy_ = lazy, lazy_state_ = lazy_state;
+    const int n = Components(t, first, last);
+    lazy_ = nullptr;
+    return n;
+  }
+
+  void AddVisited(int64_t visited) {
+    if (kEmit) out_->visited += visited;
+  }
+
+ private:
+  glm::dvec3 LeafGradient(const Node& t) const { return lazy_ ? lazy_(lazy_state_) : t.g; }
+
+  int Components(const Node& t, int first, int last) {
+    if (kEmit) ++out_->leaves;
+    if (last - first == 1) return Component(t, first);
+    int order[kMaxSurfaces], count = 0;
+    if (!c_.ordered) {
+      for (int i = first; i < last; ++i) order[count++] = i;
+    } else if (c_.orthographic) {
+      const bool descending = glm::dot(LeafGradient(t), c_.dir) > 0;  // f grows away from the eye
+      for (int i = first; i < last; ++i) order[count++] = descending ? last - 1 - (i - first) : i;
+    } else {
+      // Isovalues above f_T(eye), highest first; then those at or below it, lowest first.
+      const double fe = t.f[0] + glm::dot(LeafGradient(t), c_.eye - glm::dvec3(Unpack(t.v[0])));
+      int split = first;
+      while (split < last && c_.iso[split] <= fe) ++split;
+      for (int i = last - 1; i >= split; --i) order[count++] = i;
+      for (int i = first; i < split; ++i) order[count++] = i;
+    }
+    int triangles = 0;
+    for (int j = 0; j < count; ++j) triangles += Component(t, order[j]);
+    return triangles;
+  }
+
+  // Marching tetrahedra for sorted isovalue index s.
+  int Component(const Node& t, int s) {
+    const float iso = c_.iso[s];
+    const unsigned mask = unsigned(t.f[0] >= iso) | (unsigned(t.f[1] >= iso) << 1) |
+                          (unsigned(t.f[2] >= iso) << 2) | (unsigned(t.f[3] >= iso) << 3);
+    const MarchingTetsCase& mc = (*c_.cases)[mask];
+    if (mc.edge_count == 0) return 0;
+    const int count = mc.edge_count - 2;
+    if (!kEmit) return count;
+    uint32_t v[4];
+    const int edges = mc.edge_count;  // a local: the stores below could alias the table
+    for (int i = 0; i < edges; ++i) v[i] = EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
+    if (count == 2 && QuadSplitsAlong13(v)) {
+      // Rotate the cycle so the fan's diagonal (v0, v2) is the chosen one.
+      const uint32_t v0 = v[0];
+      v[0] = v[1], v[1] = v[2], v[2] = v[3], v[3] = v0;
+    }
+    // Wound so the geometric normal points to decreasing f (out of the region f >= iso).
+    const bool flip = mc.flip[c_.negative[t.cls.value]];
+    const uint8_t surface = c_.iso_surface[s];
+    if (c_.clip && !InsideDataBox(c_, t)) {
+      ClipTriangle(v[0], flip ? v[2] : v[1], flip ? v[1] : v[2], surface);
+      if (count == 2) ClipTriangle(v[0], flip ? v[3] : v[2], flip ? v[2] : v[3], surface);
+      return count;
+    }
+    uint32_t* out = out_->triangles.Extend(3 * count);
+    uint8_t* surf = out_->surface.Extend(count);
+    out[0] = v[0], out[1] = flip ? v[2] : v[1], out[2] = flip ? v[1] : v[2];
+    surf[0] = surface;
+    if (count == 2) {
+      out[3] = v[0], out[4] = flip ? v[3] : v[2], out[5] = flip ? v[2] : v[3];
+      surf[1] = surface;
+    }
+    return count;
+  }
+
+  // A quad is split along its shorter diagonal (better triangles); equal lengths are broken by
+  // position, so the choice does not depend on the tetrahedron's vertex order.
+  bool QuadSplitsAlong13(const uint32_t v[4]) const {
+    const glm::dvec3 p0 = Position(v[0]), p1 = Position(v[1]), p2 = Position(v[2]),
+                     p3 = Position(v[3]);
+    const double d02 = glm::dot(p2 - p0, p2 - p0), d13 = glm::dot(p3 - p1, p3 - p1);
+    if (d02 != d13) return d13 < d02;
+    auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
+      return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+    };
+    const glm::dvec3 m02 = less(p0, p2) ? p0 : p2, m13 = less(p1, p3) ? p1 : p3;
+    return less(m13, m02);
+  }
+
+  glm::dvec3 Position(uint32_t i) const {
+    const float* p = &out_->positions[3 * size_t(i)];
+    return {p[0], p[1], p[2]};
+  }
+
+  // The crossing of surface s on the edge between corners ia and ib: found by edge key, or
+  // computed (interpolated from the edge's lexicographically smaller end, so every
+  // tetrahedron around the edge produces the same bits) and stored.
+  uint32_t EdgeVertex(const Node& t, int ia, int ib, int s) {
+    const PackedPoint mid2 = t.v[ia] + t.v[ib];
+    if (c_.normals != NormalMode::kSmooth) return NewVertex(t, ia, ib, s, mid2, 0);
+    const uint64_t key = EdgeKey(mid2, s);
+    const uint32_t found = table_->FindOrInsert(key, out_->vertices);
+    return found != EdgeVertexTable::kMissing ? found : NewVertex(t, ia, ib, s, mid2, key);
+  }
+
+  // Out of line: most lookups hit, and the hit path stays small enough to inline.
+  __attribute__((noinline)) uint32_t NewVertex(const Node& t, int ia, int ib, int s,
+                                               PackedPoint mid2, uint64_t key) {
+    const uint32_t fresh = out_->vertices;
+    const bool share = c_.normals == NormalMode::kSmooth;
+    glm::ivec3 a = Unpack(t.v[ia]), b = Unpack(t.v[ib]);
+    float fa = t.f[ia], fb = t.f[ib];
+    glm::ivec3 d = b - a;
+    if ((d.x != 0 ? d.x : d.y != 0 ? d.y : d.z) < 0) {
+      std::swap(a, b);
+      std::swap(fa, fb);
+      d = -d;
+    }
+    // The parameter in double (float differences of values near FLT_MAX overflow), the point
+    // in single precision: a grid coordinate below 2^13 keeps ~1e-3 voxel in its last bit, far
+    // below the codec's quantization step.
+    const float tt = float((double(c_.iso[s]) - fa) / (double(fb) - fa));
+    const glm::vec3 pg = glm::vec3(a) + tt * glm::vec3(d);
+    const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
+    glm::vec3 grad;
+    if (share) {
+      const glm::vec3 g = glm::mix(GridGradient(a), GridGradient(b), tt);
+      grad = glm::dot(g, g) != 0 ? g : glm::vec3(LeafGradient(t));
+    } else {
+      grad = glm::vec3(t.g);
+    }
+    grad *= c_.inv_spacing;
+    const float len2 = glm::dot(grad, grad);
+    const glm::vec3 nrm =
+        len2 >= std::numeric_limits<float>::min() && len2 <= std::numeric_limits<float>::max()
+            ? grad * (-1.0f / std::sqrt(len2))
+            : NormalInDouble(t, a, b, tt, share);
+    float* p = out_->positions.Extend(3);
+    p[0] = pw.x, p[1] = pw.y, p[2] = pw.z;
+    float* q = out_->normals.Extend(3);
+    q[0] = nrm.x, q[1] = nrm.y, q[2] = nrm.z;
+    ++out_->vertices;
+    if (share && faces_.EdgeOnFace(Unpack(mid2))) out_->boundary.push_back({fresh, key});
+    return fresh;
+  }
+
+  // The normal when the float gradient's squared length leaves the normal float range (samples
+  // near FLT_MAX overflow it; tiny gradients, below ~1e-19 per world unit, underflow it): the
+  // same gradient in double, (0, 0, 0) only where the data are flat.
+  __attribute__((noinline)) glm::vec3 NormalInDouble(const Node& t, const glm::ivec3& a,
+                                                     const glm::ivec3& b, float tt,
+                                                     bool share) const {
+    glm::dvec3 g;
+    if (share) {
+      const glm::dvec3 ga = GridGradient<double>(a), gb = GridGradient<double>(b);
+      const glm::dvec3 mixed = glm::mix(ga, gb, double(tt));
+      g = glm::dot(mixed, mixed) != 0 ? mixed : LeafGradient(t);
+    } else {
+      g = t.g;  // set for every leaf when normals are flat (a block leaf's only then)
+    }
+    g /= c_.xf.spacing;
+    const double scale = std::max({std::abs(g.x), std::abs(g.y), std::abs(g.z)});
+    if (!(scale > 0) || !std::isfinite(scale)) return glm::vec3(0.0f);
+    g /= scale;  // no overflow in the squares below
+    return glm::vec3(g * (-1.0 / std::sqrt(glm::dot(g, g))));
+  }
+
+  // Central differences of the samples at a grid point, one-sided on the cube's faces, in
+  // precision T (float on the hot path; double differences cannot overflow).
+  template <typename T = float>
+  glm::vec<3, T> GridGradient(const glm::ivec3& p) const {
+    return Interior(p) ? InteriorGradient<T>(p) : FaceGradient<T>(p);
+  }
+
+  // Both neighbours exist on every axis.
+  bool Interior(const glm::ivec3& p) const {
+    const unsigned span = unsigned(c_.n - 2);
+    return unsigned(p.x - 1) < span && unsigned(p.y - 1) < span && unsigned(p.z - 1) < span;
+  }
+
+  template <typename T = float>
+  glm::vec<3, T> InteriorGradient(const glm::ivec3& p) const {
+    const uint64_t *ox = c_.value_bytes[0], *oy = c_.value_bytes[1], *oz = c_.value_bytes[2];
+    const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
+    return T(0.5) * glm::vec<3, T>(F<T>(ox[p.x + 1] + y + z) - F<T>(ox[p.x - 1] + y + z),
+                                   F<T>(x + oy[p.y + 1] + z) - F<T>(x + oy[p.y - 1] + z),
+                                   F<T>(x + y + oz[p.z + 1]) - F<T>(x + y + oz[p.z - 1]));
+  }
+
+  // One-sided on the cube's faces. Out of line: rare, and it would crowd the vertex path.
+  template <typename T = float>
+  __attribute__((noinline)) glm::vec<3, T> FaceGradient(const glm::ivec3& p) const {
+    const uint64_t *ox = c_.value_bytes[0], *oy = c_.value_bytes[1], *oz = c_.value_bytes[2];
+    const int last = c_.n - 1;
+    const glm::ivec3 lo(std::max(p.x - 1, 0), std::max(p.y - 1, 0), std::max(p.z - 1, 0));
+    const glm::ivec3 hi(std::min(p.x + 1, last), std::min(p.y + 1, last), std::min(p.z + 1, last));
+    const uint64_t x = ox[p.x], y = oy[p.y], z = oz[p.z];
+    static constexpr T kInvSpan[3] = {T(0), T(1), T(0.5)};  // by hi - lo
+    return {(F<T>(ox[hi.x] + y + z) - F<T>(ox[lo.x] + y + z)) * kInvSpan[hi.x - lo.x],
+            (F<T>(x + oy[hi.y] + z) - F<T>(x + oy[lo.y] + z)) * kInvSpan[hi.y - lo.y],
+            (F<T>(x + y + oz[hi.z]) - F<T>(x + y + oz[lo.z])) * kInvSpan[hi.z - lo.z]};
+  }
+
+  template <typename T>
+  T F(uint64_t value_offset) const {
+    return T(c_.F(value_offset));
+  }
+
+  // A leaf that straddles the data box: keep the part of the triangle inside it.
+  // Out of line: rare, and its polygon buffers would otherwise enlarge every leaf's frame.
+  __attribute__((noinline)) void ClipTriangle(uint32_t a, uint32_t b, uint32_t d, uint8_t surface) {
+    struct V {
+      glm::dvec3 p, n;
+    };
+    auto load = [&](uint32_t i) {
+      const float* q = &out_->normals[3 * size_t(i)];
+      return V{Position(i), glm::dvec3(q[0], q[1], q[2])};
+    };
+    V poly[9], next[9];
+    uint32_t ids[9], next_ids[9];
+    int count = 3;
+    poly[0] = load(a), poly[1] = load(b), poly[2] = load(d);
+    ids[0] = a, ids[1] = b, ids[2] = d;
+    for (int axis = 0; axis < 3; ++axis) {
+      const double limit = c_.xf.origin[axis] + c_.xf.spacing[axis] * c_.data_max[axis];
+      int m = 0;
+      for (int i = 0; i < count; ++i) {
+        const V& p = poly[i];
+        const V& q = poly[(i + 1) % count];
+        const bool pin = p.p[axis] <= limit, qin = q.p[axis] <= limit;
+        if (pin) next[m] = p, next_ids[m++] = ids[i];
+        if (pin != qin) {
+          const double s = (limit - p.p[axis]) / (q.p[axis] - p.p[axis]);
+          next[m] = V{glm::mix(p.p, q.p, s), glm::normalize(glm::mix(p.n, q.n, s))};
+          next[m].p[axis] = limit;
+          next_ids[m++] = EdgeVertexTable::kMissing;
+        }
+      }
+      count = m;
+      std::copy(next, next + m, poly);
+      std::copy(next_ids, next_ids + m, ids);
+      if (count < 3) return;
+    }
+    for (int i = 0; i < count; ++i) {
+      if (ids[i] != EdgeVertexTable::kMissing) continue;
+      ids[i] = out_->vertices++;
+      float* p = out_->positions.Extend(3);
+      p[0] = float(poly[i].p.x), p[1] = float(poly[i].p.y), p[2] = float(poly[i].p.z);
+      float* q = out_->normals.Extend(3);
+      q[0] = float(poly[i].n.x), q[1] = float(poly[i].n.y), q[2] = float(poly[i].n.z);
+    }
+    for (int i = 1; i + 1 < count; ++i) {
+      uint32_t* out = out_->triangles.Extend(3);
+      out[0] = ids[0], out[1] = ids[i], out[2] = ids[i + 1];
+      out_->surface.Push(surface);
+    }
+  }
+
+  const Context& c_;
+  EdgeVertexTable* table_;
+  SubtreeMesh* out_;
+  RootFaces faces_{TetVertices{}};
+  GradientFn lazy_ = nullptr;  // set during Leaf for a node without its gradient
+  const void* lazy_state_ = nullptr;
+};
+
+}  // namespace isostream::extract_internal

@@ -1,0 +1,192 @@
+// A tetrahedron of the bisection tree as the extractor carries it, the request context it is
+// read against, and the per-node steps of Gerstner's traversal (§3-§5): decide (cull, leaf or
+// refine) and bisect (children in draw order, their values and §5 gradients). Private to
+// server/extract.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+
+#include "server/extract/extract_request.h"
+#include "server/extract/marching_tets.h"
+#include "server/hierarchy/bisection.h"
+#include "server/hierarchy/block_tables.h"
+#include "server/hierarchy/hierarchy.h"
+
+namespace isostream::extract_internal {
+
+// A grid point packed as x | y << 21 | z << 42. Coordinates are below 2^13 (k <= 12), so sums
+// of two points stay inside their fields: a refinement vertex is (v0 + v3) >> 1 (both ends have
+// the same parity per axis, so no bit crosses a field), and a + b is an edge's doubled midpoint.
+using PackedPoint = uint64_t;
+inline constexpr int kFieldBits = 21;
+inline constexpr uint64_t kFieldMask = (uint64_t{1} << kFieldBits) - 1;
+inline PackedPoint Pack(const glm::ivec3& p) {
+  return uint64_t(p.x) | (uint64_t(p.y) << kFieldBits) | (uint64_t(p.z) << (2 * kFieldBits));
+}
+inline glm::ivec3 Unpack(PackedPoint p) {
+  return {int(p & kFieldMask), int((p >> kFieldBits) & kFieldMask), int(p >> (2 * kFieldBits))};
+}
+
+struct Node {
+  PackedPoint v[4];  // canonical vertex order of the class
+  float f[4];
+  glm::dvec3 g;  // gradient of the linear interpolant on T, grid units
+  // Byte offsets in the store of the refinement vertex's sample and eta (unused at the finest
+  // level).
+  uint64_t xref_value, xref_eta;
+  TetClass cls;
+  // Which child Bisect draws first, decided when the node is made: off the chain from a node
+  // to its far child, where the plane test would delay every step (unused at the finest level).
+  bool child0_first;
+  int level;
+};
+
+// Everything the traversal reads, fixed for one request.
+struct Context {
+  const char* store = nullptr;                                   // Hierarchy::bricks()
+  const uint64_t* value_bytes[3] = {nullptr, nullptr, nullptr};  // Hierarchy::value_byte_offsets()
+  const uint64_t* eta_bytes[3] = {nullptr, nullptr, nullptr};    // Hierarchy::eta_byte_offsets()
+  int k = 0, n = 0;
+  glm::ivec3 data_max{0};             // data box is [0, data_max]
+  bool clip = false;                  // the data box is smaller than the cube
+  float iso[kMaxSurfaces];            // ascending
+  uint8_t iso_surface[kMaxSurfaces];  // request index of iso[i]
+  int iso_count = 0;
+  float eps = 0;
+  bool ordered = true;
+  bool orthographic = false;
+  glm::dvec3 eye{0.0}, dir{0.0};  // grid space
+  NormalMode normals = NormalMode::kSmooth;
+  GridToWorld xf;
+  glm::vec3 world_origin{0.0f}, world_spacing{1.0f};  // xf in single precision
+  glm::vec3 inv_spacing{1.0f};                        // grid-space gradient -> world-space gradient
+  const ReferenceTets* tables = nullptr;
+  const BlockTables* blocks = nullptr;
+  int block_level = 0;  // 3k - 3: nodes refined here run the last three levels as one block
+                        // (-1: none)
+  const MarchingTets* cases = nullptr;
+  uint8_t negative[kNumTetClasses];  // ReferenceTet::left_handed, beside the other per-class data
+  // Per class, against ReferenceTet::plane_normal_int: perspective, normal . eye (grid space),
+  // so the eye's side of a plane through grid point x is an exact integer dot product and one
+  // comparison; orthographic, whether child 0 is drawn first (the same for every node).
+  double plane_eye[kNumTetClasses];
+  uint8_t ortho_child0_first[kNumTetClasses];
+  // 1 / (real length of one normalised class unit) per level: half the level's cube cell.
+  double inv_unit[3 * 16 + 1];
+
+  static uint64_t Sum(const uint64_t* const table[3], PackedPoint p) {
+    return table[0][p & kFieldMask] + table[1][(p >> kFieldBits) & kFieldMask] +
+           table[2][p >> (2 * kFieldBits)];
+  }
+  uint64_t ValueOffset(PackedPoint p) const { return Sum(value_bytes, p); }
+  uint64_t EtaOffset(PackedPoint p) const { return Sum(eta_bytes, p); }
+  uint64_t ValueOffset(const glm::ivec3& p) const {
+    return value_bytes[0][p.x] + value_bytes[1][p.y] + value_bytes[2][p.z];
+  }
+  float F(uint64_t value_offset) const {
+    return *reinterpret_cast<const float*>(store + value_offset);
+  }
+  float Eta(uint64_t eta_offset) const {
+    return DecodeEta(*reinterpret_cast<const uint16_t*>(store + eta_offset));
+  }
+  float F(const glm::ivec3& p) const { return F(ValueOffset(p)); }
+};
+
+enum class Decision { kCull, kLeaf, kRefine };
+
+// Lowest sorted-iso index with iso > lo, and one past the highest with iso <= hi.
+inline void IsoRange(const Context& c, float lo, float hi, int* first, int* last) {
+  int a = 0;
+  while (a < c.iso_count && c.iso[a] <= lo) ++a;
+  int b = a;
+  while (b < c.iso_count && c.iso[b] <= hi) ++b;
+  *first = a;
+  *last = b;
+}
+
+// For a leaf, [*first, *last) are the sorted isovalues that cross it.
+inline Decision Decide(const Context& c, const Node& t, int* first, int* last) {
+  if (c.clip) {
+    const glm::ivec3 v[4] = {Unpack(t.v[0]), Unpack(t.v[1]), Unpack(t.v[2]), Unpack(t.v[3])};
+    for (int a = 0; a < 3; ++a) {
+      const int lo = std::min(std::min(v[0][a], v[1][a]), std::min(v[2][a], v[3][a]));
+      if (lo >= c.data_max[a]) return Decision::kCull;
+    }
+  }
+  const float fmin = std::min(std::min(t.f[0], t.f[1]), std::min(t.f[2], t.f[3]));
+  const float fmax = std::max(std::max(t.f[0], t.f[1]), std::max(t.f[2], t.f[3]));
+  if (t.level == 3 * c.k) {
+    IsoRange(c, fmin, fmax, first, last);  // exact: a crossing needs fmin < iso <= fmax
+    return *first < *last ? Decision::kLeaf : Decision::kCull;
+  }
+  const float e = c.Eta(t.xref_eta);
+  // Any iso in [fmin - e, fmax + e] may meet f_full inside T.
+  int a = 0;
+  while (a < c.iso_count && c.iso[a] < fmin - e) ++a;
+  if (a == c.iso_count || c.iso[a] > fmax + e) return Decision::kCull;
+  if (e >= c.eps) return Decision::kRefine;
+  IsoRange(c, fmin, fmax, first, last);
+  return *first < *last ? Decision::kLeaf : Decision::kCull;
+}
+
+inline Decision Decide(const Context& c, const Node& t) {
+  int first, last;
+  return Decide(c, t, &first, &last);
+}
+
+// Whether child 0 of a tetrahedron of class cls (tables entry rt) with refinement vertex x is
+// drawn first: unless the eye is on its side of the separating plane.
+inline bool ChildZeroFirst(const Context& c, const ReferenceTet& rt, TetClass cls, PackedPoint x) {
+  if (!c.ordered) return true;
+  if (c.orthographic) return c.ortho_child0_first[cls.value];
+  const int8_t* n = rt.plane_normal_int.data();
+  const int64_t nx = n[0] * int64_t(x & kFieldMask) +
+                     n[1] * int64_t((x >> kFieldBits) & kFieldMask) +
+                     n[2] * int64_t(x >> (2 * kFieldBits));
+  return c.plane_eye[cls.value] <= double(nx);
+}
+
+// The children of t in draw order: the farther one (drawn first) in *first.
+inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
+  const ReferenceTet& rt = (*c.tables)[t.cls];
+  const PackedPoint x = (t.v[0] + t.v[3]) >> 1;
+  const float fx = c.F(t.xref_value);
+  const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
+  const PackedPoint points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
+  const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
+  const bool child0_first = t.child0_first;
+  for (int ch = 0; ch < 2; ++ch) {
+    Node& o = *((ch == 0) == child0_first ? first : second);
+    const uint8_t* cp = rt.child_point[ch].data();
+    for (int i = 0; i < 4; ++i) {
+      o.v[i] = points[cp[i]];
+      o.f[i] = fp[cp[i]];
+    }
+    o.g = t.g + w * rt.gradient_update[ch];
+    o.cls = rt.child[ch];
+    o.level = t.level + 1;
+    // The child's first read is its refinement vertex: start fetching it now (the second
+    // child has a whole subtree's time to arrive).
+    if (o.level < 3 * c.k) {
+      const PackedPoint ox = (o.v[0] + o.v[3]) >> 1;
+      o.xref_value = c.ValueOffset(ox);
+      o.xref_eta = c.EtaOffset(ox);
+      __builtin_prefetch(c.store + o.xref_value);
+      __builtin_prefetch(c.store + o.xref_eta);
+      o.child0_first = ChildZeroFirst(c, (*c.tables)[o.cls], o.cls, ox);
+    }
+  }
+}
+
+// Every vertex of t inside the data box (clipping is needed otherwise).
+inline bool InsideDataBox(const Context& c, const Node& t) {
+  for (int i = 0; i < 4; ++i)
+    for (int a = 0; a < 3; ++a)
+      if (Unpack(t.v[i])[a] > c.data_max[a]) return false;
+  return true;
+}
+
+}  // namespace isostream::extract_internal
