@@ -1,5 +1,6 @@
-// Extraction speed: sorted (back-to-front) vs --order none, 1 vs 2 threads, and an
-// extract-then-sort baseline (same traversal unsorted, then std::sort by centroid depth).
+// Extraction speed: sorted (back-to-front) vs --order none, 1 vs 2 threads, blocks vs node by
+// node for the last three levels, and an extract-then-sort baseline (same traversal unsorted,
+// then std::sort by centroid depth).
 //   build/tests/bench/bench_extract --benchmark_counters_tabular=true
 // Cases: cayley:513 iso 0 and -0.5,0,0.5; buckyball:513 iso .05,.15,.25, each at the eps that
 // gives about 1 M triangles; cayley:257 iso 0 at eps = 0.
@@ -97,6 +98,22 @@ void BM_Extract(benchmark::State& state) {
   Report(state, triangles);
 }
 
+// The same frames, 1 thread sorted, with the last three levels refined node by node instead of
+// as blocks (ExtractRequest::blocks): what the blocks are worth. arg: case
+void BM_ExtractNodeByNode(benchmark::State& state) {
+  const Scene& scene = GetScene(int(state.range(0)));
+  ExtractRequest r = scene.request;
+  r.threads = 1;
+  r.blocks = false;
+  int64_t triangles = 0;
+  for (auto _ : state) {
+    auto res = Extract(*scene.hierarchy, scene.xf, r);
+    triangles = res->stats.triangles;
+    benchmark::DoNotOptimize(res);
+  }
+  Report(state, triangles);
+}
+
 // The baseline Gerstner's method replaces: extract unsorted, then sort triangles by the
 // distance of their centroids from the eye, farthest first.
 void BM_ExtractThenSort(benchmark::State& state) {
@@ -143,6 +160,11 @@ void Args(benchmark::internal::Benchmark* b) {
       for (int sorted : {1, 0}) b->Args({c, threads, sorted});
 }
 BENCHMARK(BM_Extract)->Apply(Args)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
+BENCHMARK(BM_ExtractNodeByNode)
+    ->DenseRange(0, 3)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(1.0);
 BENCHMARK(BM_ExtractThenSort)
     ->Args({0, 1})
     ->Args({2, 1})
