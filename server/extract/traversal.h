@@ -152,11 +152,10 @@ class Traverser {
       const unsigned finest = (fr.crossing >> ((at << kBelow) - 8)) & ((1u << (1 << kBelow)) - 1);
       if (finest == 0) return 0;
       const BlockNode& b = fr.nodes[at];
-      if (kDepth > 0) {  // the root was counted, and decided to refine, by the caller
-        ++*visited;
-        if (c_.eps > 0 && c_.Eta(c_.EtaOffset(fr.p[b.refinement])) < c_.eps)
-          return BlockLeaf(fr, at, kDepth);
-      }
+      if (kDepth > 0) ++*visited;  // the root was counted, and decided to refine, by the caller
+      // Depth 1 refines: BlockPays checked its etas before the block began.
+      if (kDepth == 2 && c_.eps > 0 && c_.Eta(c_.EtaOffset(fr.p[b.refinement])) < c_.eps)
+        return BlockLeaf(fr, at, kDepth);
       const unsigned far = 2 * at + ((fr.child1_first >> at) & 1);
       const int64_t n = BlockVisit<kDepth + 1>(fr, far, visited);
       return n + BlockVisit<kDepth + 1>(fr, far ^ 1, visited);

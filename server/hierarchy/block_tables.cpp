@@ -62,10 +62,6 @@ BlockTables::BlockTables() {
     }
     for (int j = 0; j < kBlockNodes / 2; ++j)
       leaf_corners_[c][j] = nodes[kBlockNodes / 2 + j].corners;
-    for (int p = kBlockNodes - 1; p >= 1; --p) {
-      nodes[p].span |= nodes[p].corners;
-      if (p > 1) nodes[p / 2].span |= nodes[p].span;
-    }
   }
 }
 

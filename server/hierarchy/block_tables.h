@@ -28,7 +28,6 @@ struct BlockNode {
   std::array<uint8_t, 4> corner{};  // local point of each canonical vertex
   uint8_t refinement = 0;           // local point of the refinement vertex (depth < 3)
   uint16_t corners = 0;             // bit set of corner[]
-  uint16_t span = 0;                // bit set of every vertex of every tetrahedron below, and own
 };
 
 class BlockTables {

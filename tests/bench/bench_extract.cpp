@@ -7,16 +7,15 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <glm/geometric.hpp>
 #include <map>
 #include <numeric>
 
-#include <glm/geometric.hpp>
-
-#include "shared/malloc_tuning.h"
 #include "server/extract/extractor.h"
 #include "server/hierarchy/hierarchy.h"
 #include "server/volume/load.h"
 #include "server/volume/padding.h"
+#include "shared/malloc_tuning.h"
 
 namespace isostream {
 namespace {
@@ -78,12 +77,8 @@ void Report(benchmark::State& state, int64_t triangles) {
       benchmark::Counter(double(triangles) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
 }
 
-// args: case, threads, sorted (1) or --order none (0)
-void BM_Extract(benchmark::State& state) {
-  const Scene& scene = GetScene(int(state.range(0)));
-  ExtractRequest r = scene.request;
-  r.threads = int(state.range(1));
-  r.order = state.range(2) ? DrawOrder::kBackToFront : DrawOrder::kNone;
+// Extracts request r on the scene once per iteration; reports triangles/s, eps and the join.
+void RunFrames(benchmark::State& state, const Scene& scene, const ExtractRequest& r) {
   int64_t triangles = 0;
   double join_ms = 0;
   for (auto _ : state) {
@@ -98,6 +93,15 @@ void BM_Extract(benchmark::State& state) {
   Report(state, triangles);
 }
 
+// args: case, threads, sorted (1) or --order none (0)
+void BM_Extract(benchmark::State& state) {
+  const Scene& scene = GetScene(int(state.range(0)));
+  ExtractRequest r = scene.request;
+  r.threads = int(state.range(1));
+  r.order = state.range(2) ? DrawOrder::kBackToFront : DrawOrder::kNone;
+  RunFrames(state, scene, r);
+}
+
 // The same frames, 1 thread sorted, with the last three levels refined node by node instead of
 // as blocks (ExtractRequest::blocks): what the blocks are worth. arg: case
 void BM_ExtractNodeByNode(benchmark::State& state) {
@@ -105,13 +109,7 @@ void BM_ExtractNodeByNode(benchmark::State& state) {
   ExtractRequest r = scene.request;
   r.threads = 1;
   r.blocks = false;
-  int64_t triangles = 0;
-  for (auto _ : state) {
-    auto res = Extract(*scene.hierarchy, scene.xf, r);
-    triangles = res->stats.triangles;
-    benchmark::DoNotOptimize(res);
-  }
-  Report(state, triangles);
+  RunFrames(state, scene, r);
 }
 
 // The baseline Gerstner's method replaces: extract unsorted, then sort triangles by the
@@ -139,7 +137,8 @@ void BM_ExtractThenSort(benchmark::State& state) {
     }
     std::vector<uint32_t> order(t);
     std::iota(order.begin(), order.end(), 0u);
-    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return depth[a] > depth[b]; });
+    std::sort(order.begin(), order.end(),
+              [&](uint32_t a, uint32_t b) { return depth[a] > depth[b]; });
     std::vector<uint32_t> tris(3 * t);
     std::vector<uint8_t> surface(t);
     for (size_t i = 0; i < t; ++i) {
