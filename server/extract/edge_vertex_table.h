@@ -48,6 +48,15 @@ class EdgeVertexTable {
     }
   }
 
+  // The value stored for key, or kMissing (inserts nothing).
+  uint32_t Find(uint64_t key) const {
+    for (size_t i = Hash(key);; i = (i + 1) & mask_) {
+      const Slot& s = data_[i];
+      if (s.generation != generation_) return kMissing;
+      if (s.key == key) return s.value;
+    }
+  }
+
   size_t size() const { return size_; }
 
  private:

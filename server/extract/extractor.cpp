@@ -21,7 +21,6 @@
 #include <mutex>
 #include <numeric>
 #include <optional>
-#include <unordered_map>
 
 #include "server/extract/traversal.h"
 
@@ -298,7 +297,9 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   std::vector<char> done(items.size(), 0);
   size_t next = 0;
   std::mutex mu;
-  std::unordered_map<uint64_t, uint32_t> boundary_ids;
+  // Edge key -> frame vertex of the boundary vertices appended so far: a flat table, where a
+  // node-based map spent a malloc and a free per boundary vertex inside the serial join.
+  EdgeVertexTable boundary_ids(size_t{1} << 16);
   std::vector<uint32_t> to_global;
   std::atomic<bool> cancelled{false};
   OrderedMesh& m = result.mesh;
@@ -323,12 +324,9 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     const size_t part_vertices = part.vertex_count();
     // A boundary vertex already appended by an earlier part (in draw order) is reused and the
     // part's own copy dropped; the others are copied and get compacted indices.
-    constexpr uint32_t kUnset = 0xffffffffu;
+    constexpr uint32_t kUnset = EdgeVertexTable::kMissing;
     to_global.assign(part_vertices, kUnset);
-    for (const auto& [local, key] : part.boundary) {
-      auto it = boundary_ids.find(key);
-      if (it != boundary_ids.end()) to_global[local] = it->second;
-    }
+    for (const auto& [local, key] : part.boundary) to_global[local] = boundary_ids.Find(key);
     // Owned vertices are copied in runs between the (few) reused ones.
     size_t out = m.vertex_count();
     const float* pos = part.positions.data();
@@ -344,7 +342,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       m.normals.insert(m.normals.end(), nrm + 3 * v, nrm + 3 * end);
       v = end;
     }
-    for (const auto& [local, key] : part.boundary) boundary_ids.emplace(key, to_global[local]);
+    for (const auto& [local, key] : part.boundary) boundary_ids.FindOrInsert(key, to_global[local]);
     const size_t first = m.triangle_count();
     const size_t tri_base = m.triangles.size();
     m.triangles.insert(m.triangles.end(), part.triangles.data(),
