@@ -1,5 +1,5 @@
 // The extractor's edge -> vertex table: first sight inserts, later lookups find the vertex,
-// through growth (rehashing) and after a Reset.
+// through growth (rehashing) and after a Reset; Find looks without inserting.
 #include "server/extract/edge_vertex_table.h"
 
 #include <gtest/gtest.h>
@@ -25,8 +25,13 @@ TEST(EdgeVertexTable, FindsWhatItInsertedAcrossGrowthAndReset) {
     }
     EXPECT_EQ(table.size(), keys.size());
     for (size_t j = 0; j < keys.size(); ++j) ASSERT_EQ(table.FindOrInsert(keys[j], 7), j);
+    // Find reads without inserting: absent keys stay absent.
+    for (size_t j = 0; j < keys.size(); ++j) ASSERT_EQ(table.Find(keys[j]), j);
+    for (int j = 0; j < 100; ++j) ASSERT_EQ(table.Find(rng() >> 1), EdgeVertexTable::kMissing);
+    EXPECT_EQ(table.size(), keys.size());
     table.Reset();
     EXPECT_EQ(table.size(), 0u);
+    ASSERT_EQ(table.Find(keys[1]), EdgeVertexTable::kMissing);
     ASSERT_EQ(table.FindOrInsert(keys[0], 9), EdgeVertexTable::kMissing);  // forgotten
     table.Reset();
   }
