@@ -6,6 +6,7 @@ cd "$(dirname "$0")/.."
 B=${1:-build}
 "$B/tests/bench/bench_hierarchy" --benchmark_counters_tabular=true
 "$B/tests/bench/bench_extract" --benchmark_counters_tabular=true
+"$B/tests/bench/bench_memory" --benchmark_counters_tabular=true
 "$B/tests/bench/bench_stream"
 "$B/client/bench_render" --benchmark_counters_tabular=true
 for args in "cayley:65 0 0" "cayley:65 0.05 -0.5 0 0.5" "buckyball:65 0 0.05 0.15 0.25" \
