@@ -1,10 +1,10 @@
 // What one random cache line costs on this machine, the ceiling under extraction from a large
 // hierarchy: the 513^3 frames touch millions of scattered lines of an 840 MB store.
 //   build/tests/bench/bench_memory --benchmark_counters_tabular=true
-// Column ns_per_line. BM_DependentLine: each load's address comes from the previous one (pure latency), over a
-// span from L2-sized to the size of a 513^3 hierarchy. BM_IndependentLines: independent
-// random lines with a software prefetch `distance` loads ahead (0: none), i.e. how many lines
-// per second the memory system delivers when the code exposes the parallelism.
+// Column ns_per_line. BM_DependentLine: each load's address comes from the previous one (pure
+// latency), over a span from L2-sized to the size of a 513^3 hierarchy. BM_IndependentLines:
+// independent random lines with a software prefetch `distance` loads ahead (0: none), i.e. how
+// many lines per second the memory system delivers when the code exposes the parallelism.
 #include <benchmark/benchmark.h>
 #include <sys/mman.h>
 
