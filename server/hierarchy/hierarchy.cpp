@@ -269,23 +269,29 @@ class HierarchyBuilder {
     constexpr int kB = kT - 1;
     const int bxn = std::min(kB, cx), byn = std::min(kB, cy), bzn = std::min(kB, cz);
     bool ok = true;
+    static constexpr int kX[kB] = {
+        HierarchyBrick::Local(0, 0), HierarchyBrick::Local(0, 1), HierarchyBrick::Local(0, 2),
+        HierarchyBrick::Local(0, 3), HierarchyBrick::Local(0, 4), HierarchyBrick::Local(0, 5),
+        HierarchyBrick::Local(0, 6), HierarchyBrick::Local(0, 7)};
     for (int z = 0; z < kB; ++z)
       for (int y = 0; y < kB; ++y) {
-        float* value = brick->value + (z * kB + y) * kB;
-        uint16_t* eta = brick->eta + (z * kB + y) * kB;
+        const int yz = HierarchyBrick::Local(2, z) + HierarchyBrick::Local(1, y);
+        float* value = brick->value + yz;
+        uint16_t* eta = brick->eta + yz;
         const int p = z * kTZ + y * kTY;
         const int inside = z < bzn && y < byn ? bxn : 0;
         for (int x = 0; x < inside; ++x) {
-          value[x] = t[p + x];
+          value[kX[x]] = t[p + x];
           ok &= IsFinite(t[p + x]);
         }
-        for (int x = inside; x < kB; ++x) value[x] = 0.0f;
+        for (int x = inside; x < kB; ++x) value[kX[x]] = 0.0f;
         if ((z | y) & 1) {  // every x is scale 0
-          for (int x = 0; x < inside; ++x) eta[x] = EncodeEtaRoundingUp(e[p + x]);
+          for (int x = 0; x < inside; ++x) eta[kX[x]] = EncodeEtaRoundingUp(e[p + x]);
         } else {  // odd x only
-          for (int x = 0; x < inside; ++x) eta[x] = x & 1 ? EncodeEtaRoundingUp(e[p + x]) : 0;
+          for (int x = 0; x < inside; ++x)
+            eta[kX[x]] = x & 1 ? EncodeEtaRoundingUp(e[p + x]) : 0;
         }
-        for (int x = inside; x < kB; ++x) eta[x] = 0;
+        for (int x = inside; x < kB; ++x) eta[kX[x]] = 0;
         if (z & y & 1)
           for (int x = 1; x < inside; x += 2) s[z * sz + y * sy + x] = e[p + x];
       }
@@ -370,7 +376,7 @@ class HierarchyBuilder {
 
 template <typename F>
 void Hierarchy::ForEachRow(F&& f) const {
-  // Rows of 8 points along x inside one brick line up with 8 linear samples.
+  // One task per z plane of the linear output.
   tbb::parallel_for(tbb::blocked_range<int>(0, n_), [&](const tbb::blocked_range<int>& r) {
     for (int z = r.begin(); z != r.end(); ++z)
       for (int y = 0; y < n_; ++y) f(y, z, (size_t(z) * n_ + y) * n_);
@@ -420,7 +426,7 @@ absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
     value_bytes_[a].resize(n);
     eta_bytes_[a].resize(n);
     for (size_t c = 0; c < n; ++c) {
-      const size_t brick = (c >> b) * brick_stride, inside = (c & m) << (a * b);
+      const size_t brick = (c >> b) * brick_stride, inside = HierarchyBrick::Local(a, c & m);
       axis_offset_[a][c] = (brick << (3 * b)) | inside;
       value_bytes_[a][c] = brick * sizeof(HierarchyBrick) + inside * sizeof(float);
       eta_bytes_[a][c] = brick * sizeof(HierarchyBrick) + inside * sizeof(uint16_t) +
@@ -455,17 +461,17 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
             for (int lz = 0; lz <= m; ++lz)
               for (int ly = 0; ly <= m; ++ly) {
                 const int z = (bz << b) + lz, y = (by << b) + ly, x0 = int(bx << b);
-                const int local = (lz << (2 * b)) | (ly << b);
+                const int local = HierarchyBrick::Local(2, lz) + HierarchyBrick::Local(1, ly);
                 const int inside =
                     z < cube && y < cube ? std::max(0, std::min(m + 1, cube - x0)) : 0;
                 const size_t row = (size_t(z) * n + y) * n + x0;
                 for (int lx = 0; lx < inside; ++lx) {
-                  brick.value[local + lx] = samples.values[row + lx];
-                  brick.eta[local + lx] = eta_codes[row + lx];
+                  brick.value[local + HierarchyBrick::Local(0, lx)] = samples.values[row + lx];
+                  brick.eta[local + HierarchyBrick::Local(0, lx)] = eta_codes[row + lx];
                 }
                 for (int lx = inside; lx <= m; ++lx) {
-                  brick.value[local + lx] = 0.0f;
-                  brick.eta[local + lx] = 0;
+                  brick.value[local + HierarchyBrick::Local(0, lx)] = 0.0f;
+                  brick.eta[local + HierarchyBrick::Local(0, lx)] = 0;
                 }
               }
           }

@@ -52,10 +52,21 @@ inline float DecodeEta(uint16_t stored) {
 // corners and refinement vertex together, and they are close in space: bricks keep them on
 // the same pages and mostly in the same cache lines, where a linear layout puts every z step
 // a whole plane away.
+//
+// Inside a brick the points are grouped by the parities of their coordinates: 8 groups of
+// 4x4x4 (all even first), x fastest within a group. Above the last three levels the
+// traversal reads only even points, and each level below reads mostly one parity class at a
+// time: a cache line then holds 16 points it will read (an 8x8x2 region of the grid, where
+// rows of x put 4 of them in a line).
 struct HierarchyBrick {
   static constexpr int kLog2 = 3;
   static constexpr int kMask = (1 << kLog2) - 1;
   static constexpr int kPoints = 1 << (3 * kLog2);
+  // Index contribution of local coordinate c (0..7) on axis a (0 = x): the parity selects the
+  // group (64 points), c / 2 the place in it. The three axes' contributions add up.
+  static constexpr int Local(int axis, int c) {
+    return ((c & 1) << (6 + axis)) | ((c >> 1) << (2 * axis));
+  }
   float value[kPoints];
   uint16_t eta[kPoints];
 };

@@ -185,6 +185,23 @@ TEST(Hierarchy, ByteOffsetTablesAddressTheIndexedSampleAndEta) {
   }
 }
 
+// Inside a brick, points are grouped by coordinate parity (all-even first) so that a cache
+// line holds 16 points of one class: what the traversal reads above the last levels.
+TEST(Hierarchy, BricksGroupPointsByParity) {
+  const HierarchyPtr h = Build(4, TestVolumes().front(), 1);
+  for (int z = 0; z < h->n(); ++z)
+    for (int y = 0; y < h->n(); ++y)
+      for (int x = 0; x < h->n(); ++x) {
+        const size_t local = h->index(x, y, z) & 511;
+        const int lx = x & 7, ly = y & 7, lz = z & 7;
+        const size_t group = (lx & 1) | (ly & 1) << 1 | (lz & 1) << 2;
+        const size_t place = (lx >> 1) | (ly >> 1) << 2 | (lz >> 1) << 4;
+        ASSERT_EQ(local, group * 64 + place) << x << " " << y << " " << z;
+        // The brick is the one the coordinates' high bits name.
+        ASSERT_EQ(h->index(x, y, z) >> 9, h->index(x & ~7, y & ~7, z & ~7) >> 9);
+      }
+}
+
 TEST(Hierarchy, SaturationIsMonotoneAlongTheTree) {
   for (const auto& vol : TestVolumes()) {
     const int k = 4;
