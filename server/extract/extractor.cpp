@@ -318,10 +318,31 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     m.normals.reserve(3 * (t / 2 + 1024));
   }
   double join_ms = 0;
+  size_t appended = 0;  // parts
+
+  // Without a reservation (an eps request) the arrays would grow by doubling, ~9 times from
+  // the first part to a 1 M-triangle frame, copying about the frame once more. Once a 16th of
+  // the parts is in (parts vary ~10x in size: fewer project badly), they grow instead to what
+  // the parts so far project for the whole frame, plus a quarter (at least 1.5x): one or two
+  // more steps.
+  auto make_room = [&](auto& v, size_t more) {
+    const size_t needed = v.size() + more;
+    if (needed <= v.capacity()) return;
+    size_t grown = std::max(needed, 2 * v.capacity());
+    if (16 * appended >= items.size()) {
+      const size_t projected = needed * items.size() / (appended + 1);
+      grown = std::max({needed, projected + projected / 4, v.capacity() + v.capacity() / 2});
+    }
+    v.reserve(grown);
+  };
 
   auto append = [&](SubtreeMesh& part) {
     const auto tj = std::chrono::steady_clock::now();
     const size_t part_vertices = part.vertex_count();
+    make_room(m.positions, 3 * part_vertices);
+    make_room(m.normals, 3 * part_vertices);
+    make_room(m.triangles, part.triangles.size());
+    make_room(m.surface, part.surface.size());
     // A boundary vertex already appended by an earlier part (in draw order) is reused and the
     // part's own copy dropped; the others are copied and get compacted indices.
     constexpr uint32_t kUnset = EdgeVertexTable::kMissing;
@@ -351,6 +372,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       *it = to_global[*it];
     m.surface.insert(m.surface.end(), part.surface.data(),
                      part.surface.data() + part.surface.size());
+    ++appended;
     st.tets_visited += part.visited;
     st.leaves += part.leaves;
     join_ms += Ms(tj);
