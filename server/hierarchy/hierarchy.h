@@ -56,8 +56,8 @@ inline float DecodeEta(uint16_t stored) {
 // Inside a brick the points are grouped by the parities of their coordinates: 8 groups of
 // 4x4x4 (all even first), x fastest within a group. Above the last three levels the
 // traversal reads only even points, and each level below reads mostly one parity class at a
-// time: a cache line then holds 16 points it will read (an 8x8x2 region of the grid, where
-// rows of x put 4 of them in a line).
+// time: a line of samples then holds 16 points it will read (4x4 of one class, spanning 8x8
+// cells of one plane), where rows of x put 4 of them in a line.
 struct HierarchyBrick {
   static constexpr int kLog2 = 3;
   static constexpr int kMask = (1 << kLog2) - 1;
