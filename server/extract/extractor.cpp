@@ -106,7 +106,21 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
     c.negative[i] = rt.left_handed;
     const auto& ni = rt.plane_normal_int;
     const glm::dvec3 n(ni[0], ni[1], ni[2]);
-    c.plane_eye[i] = glm::dot(n, c.eye);
+    unsigned plus = 0, minus = 0;
+    for (int a = 0; a < 3; ++a) {
+      if (ni[a] == 1) plus |= 1u << a;
+      if (ni[a] == -1) minus |= 1u << a;
+    }
+    c.plane_plus[i] = extract_internal::FieldSumMultiplier(plus);
+    c.plane_minus[i] = extract_internal::FieldSumMultiplier(minus);
+    // normal . x >= normal . eye, for an integer left side: >= its ceiling. Past +-2^40 (far
+    // beyond any grid's |normal . x| < 2^15) or not a number, the answer is the same for every
+    // x: never (NaN compared false before too) or always.
+    const double eye_side = glm::dot(n, c.eye);
+    constexpr double kFar = 1099511627776.0;  // 2^40
+    c.plane_at_least[i] = !(eye_side <= kFar)  ? std::numeric_limits<int64_t>::max()
+                          : eye_side < -kFar ? std::numeric_limits<int64_t>::min()
+                                             : int64_t(std::ceil(eye_side));
     c.ortho_child0_first[i] = glm::dot(n, c.dir) >= 0;  // eye on child 1's side of every plane
   }
   for (int level = 0; level <= 3 * c.k; ++level)
@@ -146,7 +160,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
     const extract_internal::PackedPoint x = extract_internal::Pack(RefinementPoint(v));
     t.xref_value = c.ValueOffset(x);
     t.xref_eta = c.EtaOffset(x);
-    t.child0_first = extract_internal::ChildZeroFirst(c, tables[t.cls], t.cls, x);
+    t.child0_first = extract_internal::ChildZeroFirst(c, t.cls, x);
     items.push_back(t);
   }
   constexpr size_t kTargetSubtrees = 256;

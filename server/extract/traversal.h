@@ -136,7 +136,7 @@ class Traverser {
       for (unsigned at = 1; at < kBlockNodes / 2; ++at) {
         const BlockNode& b = fr.nodes[at];
         fr.child1_first |=
-            unsigned(!ChildZeroFirst(c_, (*c_.tables)[b.cls], b.cls, fr.p[b.refinement])) << at;
+            unsigned(!ChildZeroFirst(c_, b.cls, fr.p[b.refinement])) << at;
       }
     return BlockVisit<0>(fr, 1, visited);
   }

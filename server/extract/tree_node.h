@@ -69,10 +69,14 @@ struct Context {
                         // (-1: none)
   const MarchingTets* cases = nullptr;
   uint8_t negative[kNumTetClasses];  // ReferenceTet::left_handed, beside the other per-class data
-  // Per class, against ReferenceTet::plane_normal_int: perspective, normal . eye (grid space),
-  // so the eye's side of a plane through grid point x is an exact integer dot product and one
-  // comparison; orthographic, whether child 0 is drawn first (the same for every node).
-  double plane_eye[kNumTetClasses];
+  // Per class, against ReferenceTet::plane_normal_int (entries 0 or +-1). Perspective: the
+  // eye is not on child 1's side of the plane through grid point x iff normal . x >=
+  // plane_at_least (normal . eye rounded up; INT64_MAX where that is not finite), and
+  // normal . x is the sum of x's fields where the normal is +1 minus the sum where it is -1,
+  // each taken from a packed point by one multiply (FieldSum). Orthographic: whether child 0
+  // is drawn first (the same for every node).
+  uint64_t plane_plus[kNumTetClasses], plane_minus[kNumTetClasses];
+  int64_t plane_at_least[kNumTetClasses];
   uint8_t ortho_child0_first[kNumTetClasses];
   // 1 / (real length of one normalised class unit) per level: half the level's cube cell.
   double inv_unit[3 * 16 + 1];
@@ -137,16 +141,27 @@ inline Decision Decide(const Context& c, const Node& t) {
   return Decide(c, t, &first, &last);
 }
 
-// Whether child 0 of a tetrahedron of class cls (tables entry rt) with refinement vertex x is
-// drawn first: unless the eye is on its side of the separating plane.
-inline bool ChildZeroFirst(const Context& c, const ReferenceTet& rt, TetClass cls, PackedPoint x) {
+// The multiplier whose product with a packed point holds, in bits 42-57, the sum of the
+// point's fields on the axes in `axes` (bit a: axis a). Field a times 2^(42 - 21a) lands there;
+// the cross terms land below bit 36 (no carry reaches bit 42: coordinates are below 2^13) or
+// at bit 63 and above.
+inline uint64_t FieldSumMultiplier(unsigned axes) {
+  uint64_t m = 0;
+  for (int a = 0; a < 3; ++a)
+    if ((axes >> a) & 1) m += uint64_t{1} << (2 * kFieldBits - a * kFieldBits);
+  return m;
+}
+inline int64_t FieldSum(PackedPoint p, uint64_t multiplier) {
+  return int64_t(((p * multiplier) >> (2 * kFieldBits)) & 0xffff);
+}
+
+// Whether child 0 of a tetrahedron of class cls with refinement vertex x is drawn first:
+// unless the eye is on its side of the separating plane.
+inline bool ChildZeroFirst(const Context& c, TetClass cls, PackedPoint x) {
   if (!c.ordered) return true;
   if (c.orthographic) return c.ortho_child0_first[cls.value];
-  const int8_t* n = rt.plane_normal_int.data();
-  const int64_t nx = n[0] * int64_t(x & kFieldMask) +
-                     n[1] * int64_t((x >> kFieldBits) & kFieldMask) +
-                     n[2] * int64_t(x >> (2 * kFieldBits));
-  return c.plane_eye[cls.value] <= double(nx);
+  const int64_t nx = FieldSum(x, c.plane_plus[cls.value]) - FieldSum(x, c.plane_minus[cls.value]);
+  return nx >= c.plane_at_least[cls.value];
 }
 
 // The children of t in draw order: the farther one (drawn first) in *first.
@@ -176,7 +191,7 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
       o.xref_eta = c.EtaOffset(ox);
       __builtin_prefetch(c.store + o.xref_value);
       __builtin_prefetch(c.store + o.xref_eta);
-      o.child0_first = ChildZeroFirst(c, (*c.tables)[o.cls], o.cls, ox);
+      o.child0_first = ChildZeroFirst(c, o.cls, ox);
     }
   }
 }

@@ -269,6 +269,25 @@ TEST(Extract, SameOutputForOneAndTwoThreadsAndForOrderNoneAsASet) {
   EXPECT_NE(none.mesh.triangles, one.mesh.triangles);
 }
 
+// An eye ever farther away along -d orders every separating plane as the view direction d
+// does: perspective at 1e6 (integer plane tests near the eye's side), 1e30 (past the +-2^40
+// clamp) and 1e300 must draw exactly what orthographic along d draws. d is generic: no plane
+// normal (axis or face diagonal) is perpendicular to it.
+TEST(Extract, FarPerspectiveEyeDrawsAsOrthographic) {
+  const auto h = MakeHierarchy(5, CayleyField);
+  const glm::dvec3 d = glm::normalize(glm::dvec3(0.31, -0.52, 0.79));
+  ExtractRequest ortho = Request({0.0f}, 0.004, {0, 0, 0});
+  ortho.view.orthographic = true;
+  ortho.view.direction = d;
+  const auto want = RunExtract(*h, ortho);
+  ASSERT_GT(want.mesh.triangle_count(), 1000u);
+  for (double far : {1e6, 1e30, 1e300}) {
+    const auto got = RunExtract(*h, Request({0.0f}, 0.004, glm::dvec3(16.0) - far * d));
+    EXPECT_EQ(got.mesh.triangles, want.mesh.triangles) << far;
+    EXPECT_EQ(got.mesh.positions, want.mesh.positions) << far;
+  }
+}
+
 TEST(Extract, BudgetFindsTheSmallestEpsThatFits) {
   const auto h = MakeHierarchy(5, BlobsField);
   for (int64_t budget : {500, 3000, 20000}) {

@@ -67,6 +67,12 @@ TEST(ReferenceTets, SeparatingPlanesAreTheNineMirrorPlanesAndSeparate) {
     // Components are 0 or +-1 after scaling: axis planes or face-diagonal planes.
     for (int a = 0; a < 3; ++a)
       EXPECT_NEAR(std::abs(scaled[a]), std::round(std::abs(scaled[a])), 1e-9);
+    // The integer normal: entries 0 or +-1 (the extractor's plane test sums coordinates with
+    // those signs), a positive multiple of the real one.
+    for (int a = 0; a < 3; ++a) EXPECT_LE(std::abs(int(t.plane_normal_int[a])), 1);
+    const glm::dvec3 ni(t.plane_normal_int[0], t.plane_normal_int[1], t.plane_normal_int[2]);
+    EXPECT_NEAR(glm::dot(ni, t.plane_normal),
+                glm::length(ni) * glm::length(t.plane_normal), 1e-9);
     // Strict separation: vertex 0 (child 0 only) in front, vertex 3 (child 1 only) behind.
     const glm::dvec3 mid = (glm::dvec3(t.vertex[0]) + glm::dvec3(t.vertex[3])) * 0.5;
     EXPECT_GT(glm::dot(t.plane_normal, glm::dvec3(t.vertex[0]) - mid), 0.1);
