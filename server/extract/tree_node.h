@@ -71,7 +71,7 @@ struct Context {
   uint8_t negative[kNumTetClasses];  // ReferenceTet::left_handed, beside the other per-class data
   // Per class, against ReferenceTet::plane_normal_int (entries 0 or +-1). Perspective: the
   // eye is not on child 1's side of the plane through grid point x iff normal . x >=
-  // plane_at_least (normal . eye rounded up; INT64_MAX where that is not finite), and
+  // plane_at_least (normal . eye rounded up, clamped far outside any grid: MakeContext), and
   // normal . x is the sum of x's fields where the normal is +1 minus the sum where it is -1,
   // each taken from a packed point by one multiply (FieldSum). Orthographic: whether child 0
   // is drawn first (the same for every node).
