@@ -30,11 +30,11 @@ const BlockTables& BlockTables::Get() {
 
 BlockTables::BlockTables() {
   const ReferenceTets& tets = ReferenceTets::Get();
-  for (int c = 0; c < kNumTetClasses; ++c) {
-    if (tets[TetClass{static_cast<uint8_t>(c)}].level_mod3 != 0) continue;
+  for (const TetClass root : tets.kuhn_classes()) {
+    const int c = root.value;
     std::array<std::array<Weights, 4>, kBlockNodes> corners{};
     auto& nodes = nodes_[c];
-    nodes[1].cls = TetClass{static_cast<uint8_t>(c)};
+    nodes[1].cls = root;
     for (int i = 0; i < 4; ++i) {
       corners[1][i] = {0, 0, 0, 0};
       corners[1][i][i] = kWeightSum;

@@ -195,6 +195,9 @@ ReferenceTets::ReferenceTets() {
     t.gradient_update[1] = 2.0 * grad0;
   }
 
+  for (size_t c = 0; c < tets_.size(); ++c)
+    if (tets_[c].level_mod3 == 0) kuhn_classes_.push_back(TetClass{static_cast<uint8_t>(c)});
+
   // (4) BSP over the faces the initial tetrahedra share: all are planes through the diagonal.
   std::vector<glm::dvec3> planes;
   for (int a = 0; a < kNumInitialTets; ++a)

@@ -61,6 +61,8 @@ class ReferenceTets {
 
   const ReferenceTet& operator[](TetClass c) const { return tets_[c.value]; }
   const std::vector<ReferenceTet>& all() const { return tets_; }
+  // The classes at Kuhn levels (level_mod3 == 0, 24 of them): the roots of three-level blocks.
+  const std::vector<TetClass>& kuhn_classes() const { return kuhn_classes_; }
 
   // The 6 initial tetrahedra of the domain cube: class and the cube corners (0 or 1 per axis)
   // of its canonical vertices.
@@ -87,6 +89,7 @@ class ReferenceTets {
   void Walk(int node, const glm::dvec3& eye, bool orthographic, int* out, int* count) const;
 
   std::vector<ReferenceTet> tets_;
+  std::vector<TetClass> kuhn_classes_;
   std::array<TetClass, kNumInitialTets> initial_{};
   std::array<std::array<glm::ivec3, 4>, kNumInitialTets> initial_vertices_{};
   std::vector<BspNode> bsp_;

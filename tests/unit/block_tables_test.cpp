@@ -24,9 +24,8 @@ TEST(BlockTables, PositionsMatchBisectionOnCoordinates) {
   const ReferenceTets& tets = ReferenceTets::Get();
   const BlockTables& blocks = BlockTables::Get();
   int roots = 0;
-  for (int c = 0; c < kNumTetClasses; ++c) {
-    const TetClass cls{static_cast<uint8_t>(c)};
-    if (tets[cls].level_mod3 != 0) continue;
+  for (const TetClass cls : tets.kuhn_classes()) {
+    const int c = cls.value;
     ++roots;
     const BlockNode* nodes = blocks[cls];
     // Scale 8 keeps three levels of midpoints integral.

@@ -83,9 +83,8 @@ TEST(ExtractBlocks, BitSetsMatchTheirScalarDefinition) {
   const ReferenceTets& tets = ReferenceTets::Get();
   const BlockTables& blocks = BlockTables::Get();
   int classes = 0;
-  for (int c = 0; c < kNumTetClasses; ++c) {
-    const TetClass cls{static_cast<uint8_t>(c)};
-    if (tets[cls].level_mod3 != 0) continue;
+  for (const TetClass cls : tets.kuhn_classes()) {
+    const int c = cls.value;
     ++classes;
     for (unsigned above = 0; above < (1u << kBlockPoints); ++above)
       ASSERT_EQ(extract_internal::CrossingLeaves(blocks.leaf_corners(cls), above),
