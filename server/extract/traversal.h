@@ -196,16 +196,15 @@ class Traverser {
     return c.self->BlockGradient(*c.frame, c.at, c.depth);
   }
 
-  // The gradient of block position `at` by the §5 updates along its path, in the order and
-  // arithmetic of Bisect.
+  // The gradient of block position `at` by the §5 updates along its path (Wavelet, as Bisect
+  // does).
   glm::dvec3 BlockGradient(const BlockFrame& fr, unsigned at, int depth) const {
     glm::dvec3 g = fr.root->g;
     for (int d = 0; d < depth; ++d) {
       const BlockNode& a = fr.nodes[at >> (depth - d)];
       const int ch = (at >> (depth - d - 1)) & 1;
-      const double w = (double(fr.f[a.refinement]) -
-                        0.5 * (double(fr.f[a.corner[0]]) + double(fr.f[a.corner[3]]))) *
-                       c_.inv_unit[fr.root->level + d];
+      const double w = Wavelet(c_, fr.f[a.refinement], fr.f[a.corner[0]], fr.f[a.corner[3]],
+                               fr.root->level + d);
       g = g + w * (*c_.tables)[a.cls].gradient_update[ch];
     }
     return g;

@@ -164,6 +164,14 @@ inline bool ChildZeroFirst(const Context& c, TetClass cls, PackedPoint x) {
   return nx >= c.plane_at_least[cls.value];
 }
 
+// §5: the wavelet at the refinement vertex of a tetrahedron at `level` (value fx there, f0 and
+// f3 at the refinement edge's ends), per class unit; child ch's gradient is the parent's plus
+// it times ReferenceTet::gradient_update[ch]. One formula for Bisect and for the blocks'
+// lazily derived gradients, so they agree bit for bit.
+inline double Wavelet(const Context& c, float fx, float f0, float f3, int level) {
+  return (double(fx) - 0.5 * (double(f0) + double(f3))) * c.inv_unit[level];
+}
+
 // The children of t in draw order: the farther one (drawn first) in *first.
 inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
@@ -171,7 +179,7 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const float fx = c.F(t.xref_value);
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
   const PackedPoint points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
-  const double w = (double(fx) - 0.5 * (double(t.f[0]) + double(t.f[3]))) * c.inv_unit[t.level];
+  const double w = Wavelet(c, fx, t.f[0], t.f[3], t.level);
   const bool child0_first = t.child0_first;
   for (int ch = 0; ch < 2; ++ch) {
     Node& o = *((ch == 0) == child0_first ? first : second);
