@@ -114,8 +114,8 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
     c.plane_plus[i] = extract_internal::FieldSumMultiplier(plus);
     c.plane_minus[i] = extract_internal::FieldSumMultiplier(minus);
     // normal . x >= normal . eye, for an integer left side: >= its ceiling. Past +-2^40 (far
-    // beyond any grid's |normal . x| < 2^15) or not a number, the answer is the same for every
-    // x: never (NaN compared false before too) or always.
+    // beyond any grid's |normal . x| < 2^15) the answer is the same for every x: never or
+    // always. Not a number (an eye whose grid coordinates overflow): never.
     const double eye_side = glm::dot(n, c.eye);
     constexpr double kFar = 1099511627776.0;  // 2^40
     c.plane_at_least[i] = !(eye_side <= kFar)  ? std::numeric_limits<int64_t>::max()

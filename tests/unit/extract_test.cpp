@@ -286,6 +286,12 @@ TEST(Extract, FarPerspectiveEyeDrawsAsOrthographic) {
     EXPECT_EQ(got.mesh.triangles, want.mesh.triangles) << far;
     EXPECT_EQ(got.mesh.positions, want.mesh.positions) << far;
   }
+  // A finite eye whose grid coordinates overflow (world spacing 1e-200): the plane sides turn
+  // to +-inf or NaN, which must still give a complete frame, not a crash or an empty one.
+  GridToWorld tiny;
+  tiny.spacing = glm::dvec3(1e-200);
+  const auto overflow = RunExtract(*h, Request({0.0f}, 0.004, -1e200 * d), tiny);
+  EXPECT_EQ(overflow.mesh.triangle_count(), want.mesh.triangle_count());
 }
 
 TEST(Extract, BudgetFindsTheSmallestEpsThatFits) {
