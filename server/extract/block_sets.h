@@ -1,5 +1,6 @@
 // Bit-set arithmetic of a three-level block (traversal.h): which of its 10 points lie on the
-// upper side of an isovalue, and which of its 8 finest tetrahedra have corners on both sides.
+// upper side of an isovalue, and which of its 8 finest tetrahedra have corners on both sides;
+// and the same side test for one tetrahedron's 4 corners.
 // SSE2 where available; the scalar forms define the result and are tested against it.
 #pragma once
 
@@ -38,6 +39,22 @@ inline unsigned AbovePoints(const float* f, float iso) {
   return lo | mid << 4 | unsigned(f[8] >= iso) << 8 | unsigned(f[9] >= iso) << 9;
 #else
   return AbovePointsScalar(f, iso);
+#endif
+}
+
+// Bit i: f[i] >= iso (false for NaN), for a tetrahedron's 4 corners: its marching-tetrahedra
+// case (leaf_emitter.h).
+inline unsigned AboveCornersScalar(const float* f, float iso) {
+  unsigned m = 0;
+  for (int i = 0; i < 4; ++i) m |= unsigned(f[i] >= iso) << i;
+  return m;
+}
+
+inline unsigned AboveCorners(const float* f, float iso) {
+#ifdef __SSE2__
+  return unsigned(_mm_movemask_ps(_mm_cmpge_ps(_mm_loadu_ps(f), _mm_set1_ps(iso))));
+#else
+  return AboveCornersScalar(f, iso);
 #endif
 }
 

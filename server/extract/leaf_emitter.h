@@ -11,6 +11,7 @@
 #include <glm/vec3.hpp>
 #include <limits>
 
+#include "server/extract/block_sets.h"
 #include "server/extract/edge_vertex_table.h"
 #include "server/extract/subtree_mesh.h"
 #include "server/extract/tree_node.h"
@@ -108,9 +109,7 @@ class LeafEmitter {
   // Marching tetrahedra for sorted isovalue index s.
   int Component(const Node& t, int s) {
     const float iso = c_.iso[s];
-    const unsigned mask = unsigned(t.f[0] >= iso) | (unsigned(t.f[1] >= iso) << 1) |
-                          (unsigned(t.f[2] >= iso) << 2) | (unsigned(t.f[3] >= iso) << 3);
-    const MarchingTetsCase& mc = (*c_.cases)[mask];
+    const MarchingTetsCase& mc = (*c_.cases)[AboveCorners(t.f, iso)];
     if (mc.edge_count == 0) return 0;
     const int count = mc.edge_count - 2;
     if (!kEmit) return count;

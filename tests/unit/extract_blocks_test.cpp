@@ -102,6 +102,8 @@ TEST(ExtractBlocks, BitSetsMatchTheirScalarDefinition) {
     const float iso = trial % 7 == 0 ? specials[trial % 5] : float(pick(rng));
     ASSERT_EQ(extract_internal::AbovePoints(f, iso), extract_internal::AbovePointsScalar(f, iso))
         << "trial " << trial;
+    ASSERT_EQ(extract_internal::AboveCorners(f, iso), extract_internal::AboveCornersScalar(f, iso))
+        << "trial " << trial;
   }
 }
 
