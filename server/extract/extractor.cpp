@@ -234,7 +234,9 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     // before a "too many" end is known, the step extrapolates with slope -1.
     auto t0 = std::chrono::steady_clock::now();
     const int half = (h.n() - 1) / 2;
-    const int64_t limit = 4 * r.budget;
+    // Saturated: a budget past any frame ("everything") must not overflow the limit.
+    constexpr int64_t kMaxLimit = std::numeric_limits<int64_t>::max() / 2;
+    const int64_t limit = r.budget > kMaxLimit / 4 ? kMaxLimit : 4 * r.budget;
     auto count_at = [&](double e) {
       ++st.budget_passes;
       return CountAt(MakeContext(h, xf, r, e), limit);

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <glm/geometric.hpp>
+#include <limits>
 #include <random>
 #include <set>
 
@@ -307,6 +308,20 @@ TEST(Extract, BudgetFindsTheSmallestEpsThatFits) {
       ASSERT_TRUE(finer.ok());
       EXPECT_GT(*finer, budget) << "a smaller eps would also have fit";
     }
+  }
+}
+
+// A budget larger than any frame (up to the largest int64) means everything: the eps 0 mesh.
+TEST(Extract, BudgetPastAnyFrameGivesTheFullResolutionMesh) {
+  const auto h = MakeHierarchy(4, BlobsField);
+  ExtractRequest r = Request({0.2f, 0.5f}, 0, {50, 50, 50});
+  const auto full = RunExtract(*h, r);
+  for (int64_t budget : {int64_t{1} << 40, (int64_t{1} << 61) + 1,
+                         std::numeric_limits<int64_t>::max()}) {
+    r.budget = budget;
+    const auto res = RunExtract(*h, r);
+    EXPECT_EQ(res.stats.eps_used, 0) << budget;
+    EXPECT_EQ(res.mesh.triangles, full.mesh.triangles) << budget;
   }
 }
 
