@@ -49,6 +49,9 @@
 #include <atomic>
 #include <cmath>
 #include <cstddef>
+#include <cstdio>
+#include <new>
+#include <string>
 #include <cstring>
 #include <limits>
 
@@ -410,6 +413,19 @@ UninitializedVector<uint16_t> Hierarchy::LinearEtaCodes() const {
   return out;
 }
 
+namespace {
+
+absl::Status OutOfMemory(int n) {
+  const size_t nb = (size_t(n) + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
+  const double gib = double(nb * nb * nb * sizeof(HierarchyBrick)) / double(1 << 30);
+  char size[32];
+  std::snprintf(size, sizeof(size), "%.1f GiB", gib);
+  return absl::ResourceExhaustedError("hierarchy: out of memory for the " + std::to_string(n) +
+                                      "^3 cube's store (" + size + ")");
+}
+
+}  // namespace
+
 absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
   const size_t n = static_cast<size_t>(samples.n);
   if (samples.k < 1 || samples.k > 12 || samples.n != (1 << samples.k) + 1 ||
@@ -433,13 +449,19 @@ absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
                          (a == 0 ? offsetof(HierarchyBrick, eta) : 0);
     }
   }
-  bricks_.resize(nb * nb * nb);  // not initialised: the builder or the assembly writes all
+  try {
+    bricks_.resize(nb * nb * nb);  // not initialised: the builder or the assembly writes all
+  } catch (const std::bad_alloc&) {
+    return OutOfMemory(samples.n);
+  }
   AdviseHugePages(bricks_.data(), bricks_.size() * sizeof(HierarchyBrick));
   return absl::OkStatus();
 }
 
+// The store is the one large allocation, and SetUpStore reports its failure; a process at its
+// memory limit can fail the small ones too, and the caller still gets a status, not a throw.
 absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
-                                               const UninitializedVector<uint16_t>& eta_codes) {
+                                               const UninitializedVector<uint16_t>& eta_codes) try {
   auto h = std::make_shared<Hierarchy>();
   ISOSTREAM_RETURN_IF_ERROR(h->SetUpStore(samples));
   if (eta_codes.size() != samples.values.size())
@@ -478,10 +500,12 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
         }
       });
   return HierarchyPtr(std::move(h));
+} catch (const std::bad_alloc&) {
+  return OutOfMemory(samples.n);
 }
 
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
-                                            const HierarchyBuildOptions& options) {
+                                            const HierarchyBuildOptions& options) try {
   auto h = std::make_shared<Hierarchy>();
   ISOSTREAM_RETURN_IF_ERROR(h->SetUpStore(samples));
   tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
@@ -490,6 +514,8 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
   arena.execute([&] { finite = builder.Run(options); });
   if (!finite) return absl::InvalidArgumentError("hierarchy: non-finite sample");
   return HierarchyPtr(std::move(h));
+} catch (const std::bad_alloc&) {
+  return OutOfMemory(samples.n);
 }
 
 }  // namespace isostream

@@ -4,7 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <fstream>
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
@@ -381,6 +385,28 @@ TEST(Hierarchy, RejectsNonFiniteSamplesAndBadShapes) {
   bad.n = 4;  // not 2^k + 1
   bad.values.resize(64);
   EXPECT_EQ(BuildHierarchy(std::move(bad)).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+// A store the process cannot allocate is a ResourceExhausted status naming its size, not a
+// throw past the caller (the CLI and the daemon report it and go on). Run in a child process
+// whose address space is capped 32 MB above what it already uses: the 257^3 store needs 100 MB.
+void BuildUnderAddressSpaceCap(PaddedSamples s) {
+  long pages = 0;
+  std::ifstream("/proc/self/statm") >> pages;
+  const rlim_t cap = rlim_t(pages) * rlim_t(sysconf(_SC_PAGESIZE)) + (rlim_t{32} << 20);
+  rlimit limit;
+  limit.rlim_cur = limit.rlim_max = cap;
+  if (setrlimit(RLIMIT_AS, &limit) != 0) std::_Exit(3);
+  const auto h = BuildHierarchy(std::move(s));
+  const bool ok = !h.ok() && h.status().code() == absl::StatusCode::kResourceExhausted &&
+                  h.status().message().find("257^3") != std::string::npos;
+  std::_Exit(ok ? 0 : 1);
+}
+
+TEST(HierarchyDeathTest, StoreOutOfMemoryIsAStatus) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  PaddedSamples s = MakeSamples(8, [](double x, double, double) { return float(x); });
+  EXPECT_EXIT(BuildUnderAddressSpaceCap(std::move(s)), ::testing::ExitedWithCode(0), "");
 }
 
 }  // namespace
