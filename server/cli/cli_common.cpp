@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <glm/geometric.hpp>
+#include <limits>
 
 #include "shared/number_list.h"
 
@@ -55,6 +56,9 @@ void AddViewOptions(CLI::App* cmd, ViewArgs* args) {
   auto* eye = cmd->add_option("--eye", args->eye, "perspective eye x,y,z (world units)");
   auto* dir = cmd->add_option("--view-dir", args->view_dir, "orthographic view direction x,y,z");
   eye->excludes(dir);
+  args->budget_flag = budget;
+  args->eye_flag = eye;
+  args->view_dir_flag = dir;
   cmd->add_option("--order", args->order, "back-to-front (default) or none")
       ->check(CLI::IsMember({"back-to-front", "none"}));
   cmd->add_option("--normals", args->normals, "smooth (default) or flat")
@@ -68,8 +72,19 @@ absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const 
 absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& volume) {
   ExtractRequest r;
   ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> iso, ParseNumbers(args.iso, "--iso"));
-  for (double v : iso) r.isovalues.push_back(float(v));
-  if (args.budget != -1) {
+  for (double v : iso) {
+    // Samples are single precision: an isovalue past its range could never cross them (and
+    // converting it would be undefined).
+    if (std::isfinite(v) && std::fabs(v) > double(std::numeric_limits<float>::max())) {
+      char text[32];
+      std::snprintf(text, sizeof(text), "%g", v);
+      return absl::InvalidArgumentError(std::string("--iso ") + text +
+                                        " is outside the single-precision range of the samples");
+    }
+    r.isovalues.push_back(float(v));
+  }
+  const auto given = [](const CLI::Option* flag) { return flag != nullptr && flag->count() > 0; };
+  if (given(args.budget_flag)) {
     if (args.budget <= 0)
       return absl::InvalidArgumentError("--budget must be a positive triangle count");
     r.budget = args.budget;
@@ -78,12 +93,12 @@ absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& v
   } else {
     r.eps = args.eps;
   }
-  if (!args.view_dir.empty()) {
+  if (given(args.view_dir_flag)) {
     ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> d, ParseNumbers(args.view_dir, "--view-dir"));
     if (d.size() != 3) return absl::InvalidArgumentError("--view-dir needs x,y,z");
     r.view.orthographic = true;
     r.view.direction = {d[0], d[1], d[2]};
-  } else if (!args.eye.empty()) {
+  } else if (given(args.eye_flag)) {
     ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> e, ParseNumbers(args.eye, "--eye"));
     if (e.size() != 3) return absl::InvalidArgumentError("--eye needs x,y,z");
     r.view.eye = {e[0], e[1], e[2]};

@@ -27,8 +27,13 @@ absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args);
 struct ViewArgs {
   std::string iso;
   double eps = -1;
-  int64_t budget = -1;  // -1: not given
+  int64_t budget = 0;
   std::string eye, view_dir;
+  // Whether the flag was given at all (an empty or negative value is then an error, not
+  // "absent"); set by AddViewOptions.
+  const CLI::Option* budget_flag = nullptr;
+  const CLI::Option* eye_flag = nullptr;
+  const CLI::Option* view_dir_flag = nullptr;
   std::string order = "back-to-front";
   std::string normals = "smooth";
 };

@@ -68,8 +68,10 @@ int RunExtract(const ExtractArgs& args) {
     return 1;
   }
   if (args.stats) PrintStats(*request, result->stats, *prepared);
-  std::fprintf(stderr, "wrote %s: %lld triangles in back-to-front order (eps %g)\n",
-               args.output.c_str(), (long long)result->stats.triangles, result->stats.eps_used);
+  std::fprintf(stderr, "wrote %s: %lld triangles %s (eps %g)\n", args.output.c_str(),
+               (long long)result->stats.triangles,
+               request->order == DrawOrder::kNone ? "unordered" : "in back-to-front order",
+               result->stats.eps_used);
   return 0;
 }
 

@@ -101,7 +101,7 @@ int RunFetch(const FetchArgs& args) {
   // The default view (no --eye, no --view-dir) depends on the volume's bounds, which only the
   // server knows; ask for them only then.
   Volume bounds;
-  if (args.view.eye.empty() && args.view.view_dir.empty()) {
+  if (args.view.eye_flag->count() == 0 && args.view.view_dir_flag->count() == 0) {
     auto info = (*client)->GetVolumeInfo(args.volume, 1);
     if (!info.ok()) return fail(Explain(info.status(), args), 1);
     for (int a = 0; a < 3 && a < info->dims_size(); ++a) bounds.dims[a] = info->dims(a);

@@ -64,12 +64,28 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
       {"extract --volume sphere:17 --iso 0.5 --eps 0 --view-dir 0,0,0 -o " + out, "direction"},
       {"extract --volume sphere:17 --iso 0.5 --eps 0 -o " + TempPath("x.obj"), ".ply or .glb"},
       {"extract --volume sphere:17 --iso 0.5 --eps 0 -o /no/such/dir/x.ply", "/no/such/dir"},
+      // Given but empty or negative: an error, not "absent".
+      {"extract --volume sphere:17 --iso 0.5 --budget -1 -o " + out, "positive triangle count"},
+      {"extract --volume sphere:17 --iso 0.5 --eps 0 --eye '' -o " + out, "--eye"},
+      {"extract --volume sphere:17 --iso 0.5 --eps 0 --view-dir '' -o " + out, "--view-dir"},
+      {"extract --volume sphere:17 --iso 1e300 --eps 0 -o " + out, "single-precision range"},
+      {"info --volume raw:/dev/null:4x4x4:float32:xx", "byte order 'xx'"},
   };
   for (const auto& c : cases) {
     const CliRun r = Cli(c.args + " --no-cache");
     EXPECT_NE(r.code, 0) << c.args;
     EXPECT_NE(r.output.find(c.message), std::string::npos) << c.args << "\n" << r.output;
   }
+}
+
+// Two samples per axis is a valid volume: it pads to the smallest hierarchy, 3^3.
+TEST(Cli, TwoSamplesPerAxisExtract) {
+  const std::string out = TempPath("cli-two.ply");
+  const CliRun r = Cli("extract --volume cayley:2 --iso 0 --eps 0 --no-cache -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  auto ply = ReadPly(out);
+  ASSERT_TRUE(ply.ok()) << ply.status();
+  EXPECT_GT(ply->surface.size(), 0u);
 }
 
 TEST(Cli, TetsJsonListsTheSeventyTwoClasses) {
