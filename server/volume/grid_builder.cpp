@@ -1,5 +1,6 @@
 #include "server/volume/grid_builder.h"
 
+#include <openvdb/Exceptions.h>
 #include <openvdb/math/Maps.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -31,13 +32,20 @@ openvdb::math::Transform::Ptr MakeIndexToWorld(const std::array<double, 3>& spac
                                                const std::array<double, 3>& origin) {
   const openvdb::Vec3d translation(origin[0], origin[1], origin[2]);
   openvdb::math::MapBase::Ptr map;
-  if (spacing[0] == spacing[1] && spacing[1] == spacing[2]) {
-    map = std::make_shared<openvdb::math::UniformScaleTranslateMap>(spacing[0], translation);
-  } else {
-    map = std::make_shared<openvdb::math::ScaleTranslateMap>(
-        openvdb::Vec3d(spacing[0], spacing[1], spacing[2]), translation);
+  try {
+    if (spacing[0] == spacing[1] && spacing[1] == spacing[2]) {
+      map = std::make_shared<openvdb::math::UniformScaleTranslateMap>(spacing[0], translation);
+    } else {
+      map = std::make_shared<openvdb::math::ScaleTranslateMap>(
+          openvdb::Vec3d(spacing[0], spacing[1], spacing[2]), translation);
+    }
+    return std::make_shared<openvdb::math::Transform>(map);
+  } catch (const openvdb::ArithmeticError&) {
+    // OpenVDB refuses scales whose product is below ~1e-15 (voxels of 10 microns in metres),
+    // and origins far from the scale (its simplification of the map divides by it): the grid
+    // stays in index space, and Volume's spacing and origin carry the world map.
+    return openvdb::math::Transform::createLinearTransform(1.0);
   }
-  return std::make_shared<openvdb::math::Transform>(map);
 }
 
 DenseGridBuilder::DenseGridBuilder(const std::array<int, 3>& dims)

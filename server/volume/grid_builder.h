@@ -19,7 +19,8 @@ namespace isostream {
 // Planes per slab: one leaf node deep, so every slab fills whole leaves.
 inline constexpr int kSlabDepth = 8;
 
-// Index-to-world transform with SPACING per axis and sample (0, 0, 0) at ORIGIN.
+// Index-to-world transform with SPACING per axis and sample (0, 0, 0) at ORIGIN; the identity
+// where OpenVDB cannot represent it (a scale product below ~1e-15).
 openvdb::math::Transform::Ptr MakeIndexToWorld(const std::array<double, 3>& spacing,
                                                const std::array<double, 3>& origin);
 

@@ -35,9 +35,18 @@ absl::StatusOr<VolumePtr> LoadRawSpec(std::string_view spec, const VolumeLimits&
   std::string_view last, type_name, dims_text;
   if (!pop(&last)) return malformed("missing fields");
   bool big_endian = false;
+  SampleType parsed;
   if (last == "le" || last == "be") {
     big_endian = last == "be";
     if (!pop(&type_name)) return malformed("missing fields");
+  } else if (!ParseSampleType(last, &parsed) && pop(&type_name)) {
+    // Not a type: a byte order field if a type precedes it, else a wrong type.
+    if (!ParseSampleType(type_name, &parsed)) {
+      rest = std::string_view(spec).substr(4, rest.size() + 1 + type_name.size());
+      type_name = last;
+    } else {
+      return malformed("byte order '" + std::string(last) + "' is not le or be");
+    }
   } else {
     type_name = last;
   }
@@ -78,7 +87,18 @@ absl::StatusOr<VolumePtr> LoadRawSpec(std::string_view spec, const VolumeLimits&
         " " + std::string(type_name) + " samples need " + std::to_string(expected));
   }
   std::string grid_name = path.substr(path.find_last_of('/') + 1);
-  return ReadSamples(input, layout, spec_text, grid_name, {1, 1, 1}, {0, 0, 0});
+  ISOSTREAM_ASSIGN_OR_RETURN(VolumePtr volume, ReadSamples(input, layout, spec_text, grid_name,
+                                                           {1, 1, 1}, {0, 0, 0}));
+  // A compressed file's size is known only once read: the same refusal, after the fact.
+  unsigned char extra;
+  ISOSTREAM_ASSIGN_OR_RETURN(const size_t more, input.Read(&extra, 1));
+  if (more != 0) {
+    return absl::InvalidArgumentError(path + ": file has more than the " +
+                                      std::to_string(expected) + " bytes that " +
+                                      std::string(dims_text) + " " + std::string(type_name) +
+                                      " samples need");
+  }
+  return volume;
 }
 
 }  // namespace isostream

@@ -200,6 +200,7 @@ absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string
   volume->spacing = {voxel.x(), voxel.y(), voxel.z()};
   const openvdb::Vec3d origin = transform.indexToWorld(box.min());
   volume->origin = {origin.x(), origin.y(), origin.z()};
+  ISOSTREAM_RETURN_IF_ERROR(CheckWorldBox(volume->dims, volume->spacing, volume->origin, where));
   volume->min_value = scan.min_value;
   volume->max_value = scan.max_value;
   return VolumePtr(std::move(volume));

@@ -93,7 +93,7 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
 
 int HierarchyLevelFor(const std::array<int, 3>& dims) {
   const int64_t largest = std::max({dims[0], dims[1], dims[2]});
-  int k = 0;
+  int k = 1;  // the hierarchy starts at one cube of 3^3 points: 2 samples per axis pad to it
   while ((int64_t{1} << k) + 1 < largest) ++k;
   return k;
 }

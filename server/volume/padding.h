@@ -18,7 +18,7 @@
 
 namespace isostream {
 
-// Smallest k with 2^k + 1 >= max(dims). Dims must be >= 2.
+// Smallest k >= 1 with 2^k + 1 >= max(dims). Dims must be >= 2.
 int HierarchyLevelFor(const std::array<int, 3>& dims);
 
 absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume);

@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <cerrno>
 #include <climits>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <vector>
 
@@ -137,6 +139,24 @@ absl::Status CheckDims(const std::array<int64_t, 3>& dims, const VolumeLimits& l
   return absl::OkStatus();
 }
 
+absl::Status CheckWorldBox(const std::array<int, 3>& dims, const std::array<double, 3>& spacing,
+                           const std::array<double, 3>& origin, const std::string& where) {
+  static const char* const kAxis[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    const double s = spacing[a], lo = origin[a], hi = lo + s * (dims[a] - 1);
+    if (!(s >= 1 / kMaxWorldCoordinate && s <= kMaxWorldCoordinate)) {
+      return absl::InvalidArgumentError(where + ": " + kAxis[a] + " spacing " +
+                                        std::to_string(s) + " is outside [1e-30, 1e30]");
+    }
+    if (!(std::fabs(lo) <= kMaxWorldCoordinate && std::fabs(hi) <= kMaxWorldCoordinate)) {
+      char text[96];
+      std::snprintf(text, sizeof(text), "%s extent [%g, %g]", kAxis[a], lo, hi);
+      return absl::InvalidArgumentError(where + ": " + text + " is outside +-1e30 world units");
+    }
+  }
+  return absl::OkStatus();
+}
+
 GzInput::~GzInput() {
   if (file_ != nullptr) gzclose(file_);
 }
@@ -217,6 +237,7 @@ absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout
     if (disk_size - start < expected) return truncated(std::max<int64_t>(0, disk_size - start));
   }
 
+  ISOSTREAM_RETURN_IF_ERROR(CheckWorldBox(layout.dims, spacing, origin, input.path()));
   DenseGridBuilder builder(layout.dims);
   std::vector<unsigned char> raw(builder.SlabSamples(0) * bytes_per_sample);
   std::vector<float> slab(builder.SlabSamples(0));

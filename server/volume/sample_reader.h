@@ -29,6 +29,14 @@ absl::Status CheckInputFile(const std::string& path);
 absl::Status CheckDims(const std::array<int64_t, 3>& dims, const VolumeLimits& limits,
                        const std::string& where);
 
+// InvalidArgument unless the world box of DIMS samples at SPACING from ORIGIN lies within
+// +-kMaxWorldCoordinate and every spacing within [1 / kMaxWorldCoordinate, kMaxWorldCoordinate]:
+// mesh positions are single precision, and a box past that range would overflow them (or the
+// view placed around it) downstream. Messages start with WHERE.
+inline constexpr double kMaxWorldCoordinate = 1e30;
+absl::Status CheckWorldBox(const std::array<int, 3>& dims, const std::array<double, 3>& spacing,
+                           const std::array<double, 3>& origin, const std::string& where);
+
 // A file read through zlib's gz* functions, closed on destruction.
 class GzInput {
  public:

@@ -14,7 +14,8 @@ namespace isostream {
 struct Volume {
   std::string name;  // catalogue name or the spec it was loaded from
   // Samples live at grid index coordinates index_min + (i, j, k), 0 <= i < dims[0], ...
-  // The grid's transform maps index space to world space.
+  // The grid's transform maps index space to world space, where OpenVDB can represent it
+  // (MakeIndexToWorld); spacing and origin below are the authority.
   openvdb::FloatGrid::Ptr grid;
   std::array<int, 3> index_min{0, 0, 0};
   std::array<int, 3> dims{0, 0, 0};

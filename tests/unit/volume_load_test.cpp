@@ -517,6 +517,42 @@ TEST(VolumeLoadErrors, RawFileLargerThanSpec) {
               "long.raw");
 }
 
+// A compressed raw file's size is known only once read: surplus samples are refused all the
+// same (they mean wrong dims or type, which would load as plausible garbage).
+TEST(VolumeLoadErrors, GzipRawFileLargerThanSpec) {
+  const std::string path = ScratchPath("long.raw.gz");
+  WriteGz(path, Samples(Type::kUint8, {4, 4, 5}, false));
+  ExpectError(LoadVolume("raw:" + path + ":4x4x4:uint8"), absl::StatusCode::kInvalidArgument,
+              "long.raw.gz", "more than the 64 bytes");
+  absl::StatusOr<VolumePtr> exact = LoadVolume("raw:" + path + ":4x4x5:uint8");
+  ASSERT_TRUE(exact.ok()) << exact.status();
+}
+
+// Voxels of 10 microns in metres are real data (OpenVDB's transforms refuse their scale): they
+// load with their spacing and origin; a world box past the single-precision range does not.
+TEST(VolumeLoadNifti, TinyAndHugeSpacing) {
+  NiftiFile nf;
+  nf.pixdim = {1e-5f, 1e-5f, 2e-5f};
+  nf.sform_code = 1;
+  nf.sform_offset = {0.25f, -0.5f, 1e-3f};
+  const std::string tiny = ScratchPath("tiny.nii");
+  WriteBytes(tiny, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  absl::StatusOr<VolumePtr> v = LoadVolume(tiny);
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->spacing, (std::array<double, 3>{double(1e-5f), double(1e-5f), double(2e-5f)}));
+  EXPECT_EQ((*v)->origin, (std::array<double, 3>{0.25, -0.5, double(1e-3f)}));
+
+  nf.pixdim = {3e38f, 3e38f, 3e38f};
+  const std::string huge = ScratchPath("huge.nii");
+  WriteBytes(huge, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(huge), absl::StatusCode::kInvalidArgument, "huge.nii", "spacing");
+  nf.pixdim = {1e29f, 1, 1};  // a valid step, but the box reaches 4e29 then past 1e30
+  nf.dims = {12, 4, 3};
+  const std::string wide = ScratchPath("wide.nii");
+  WriteBytes(wide, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(wide), absl::StatusCode::kInvalidArgument, "wide.nii", "x extent");
+}
+
 TEST(VolumeLoadErrors, DimsBelowTwo) {
   NiftiFile nf;
   nf.dims = {4, 1, 4};

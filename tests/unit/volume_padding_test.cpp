@@ -11,7 +11,7 @@ namespace isostream {
 namespace {
 
 TEST(VolumePadding, HierarchyLevelFor) {
-  EXPECT_EQ(HierarchyLevelFor({2, 2, 2}), 0);
+  EXPECT_EQ(HierarchyLevelFor({2, 2, 2}), 1);  // the smallest hierarchy, 3^3
   EXPECT_EQ(HierarchyLevelFor({3, 2, 2}), 1);
   EXPECT_EQ(HierarchyLevelFor({2, 4, 2}), 2);
   EXPECT_EQ(HierarchyLevelFor({2, 2, 5}), 2);
