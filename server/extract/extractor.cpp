@@ -187,14 +187,33 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
   return items;
 }
 
-int64_t CountAt(const Context& c, int64_t limit) {
+// Why an observed extraction must stop now (cancelled, or past its deadline), or OK.
+absl::Status StopReason(const ExtractObserver* observer) {
+  if (observer == nullptr) return absl::OkStatus();
+  if (observer->cancel && observer->cancel->load(std::memory_order_relaxed))
+    return absl::CancelledError("extraction cancelled");
+  if (observer->deadline != std::chrono::steady_clock::time_point::max() &&
+      std::chrono::steady_clock::now() > observer->deadline)
+    return absl::DeadlineExceededError("extraction passed its deadline");
+  return absl::OkStatus();
+}
+
+// A count pass stopped by its observer sets *stopped (its count is then meaningless).
+int64_t CountAt(const Context& c, int64_t limit, const ExtractObserver* observer = nullptr,
+                absl::Status* stopped = nullptr) {
   const std::vector<Node> items = SplitIntoSubtrees(c);
   std::atomic<int64_t> total{0};
+  std::atomic<bool> halted{false};
   tbb::parallel_for(size_t(0), items.size(), [&](size_t i) {
-    if (total.load(std::memory_order_relaxed) > limit) return;
+    if (total.load(std::memory_order_relaxed) > limit || halted.load()) return;
+    if (observer && !StopReason(observer).ok()) {
+      halted = true;
+      return;
+    }
     Traverser<false> t(c, nullptr, nullptr);
     total += t.Run(items[i], limit);
   });
+  if (halted && stopped) *stopped = StopReason(observer);
   // Past the limit the sum depends on which subtrees ran before the others stopped (thread
   // timing): report limit + 1, so the budget search is deterministic and view-independent.
   const int64_t n = total.load();
@@ -237,9 +256,14 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     // Saturated: a budget past any frame ("everything") must not overflow the limit.
     constexpr int64_t kMaxLimit = std::numeric_limits<int64_t>::max() / 2;
     const int64_t limit = r.budget > kMaxLimit / 4 ? kMaxLimit : 4 * r.budget;
-    auto count_at = [&](double e) {
+    // A stopped pass ends the search: the request is answered with why, and nothing is
+    // remembered.
+    absl::Status stopped;
+    auto count_at = [&](double e) -> int64_t {
+      if (stopped.ok()) stopped = StopReason(observer);
+      if (!stopped.ok()) return 0;
       ++st.budget_passes;
-      return CountAt(MakeContext(h, xf, r, e), limit);
+      return CountAt(MakeContext(h, xf, r, e), limit, observer, &stopped);
     };
     arena.execute([&] {
       // The root's eta is +inf when the samples' wavelets pass the float range; every finite
@@ -258,7 +282,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       // Even the coarsest mesh is over budget (a budget below a few dozen triangles, or etas
       // forced to +inf): nothing fits, the coarsest is the answer.
       const bool nothing_fits = count_hi > r.budget;
-      for (int i = 0; i < 60 && !nothing_fits; ++i) {
+      for (int i = 0; i < 60 && !nothing_fits && stopped.ok(); ++i) {
         if (have_lo && x_hi - x_lo < std::log(1.01)) break;
         double x;
         if (!have_lo) {
@@ -291,6 +315,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       }
       if (count_hi <= r.budget) counted = count_hi;  // else a sentinel past the search's limit
     });
+    if (!stopped.ok()) return stopped;
     st.budget_ms = Ms(t0);
     if (r.budget_memo) r.budget_memo->Store(r.isovalues, r.budget, eps);
   }
@@ -407,7 +432,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
           // One table per worker thread, kept across frames (TBB's threads persist).
           static thread_local EdgeVertexTable table(1 << 14);
           for (size_t i = next_item++; i < items.size(); i = next_item++) {
-            if (observer && observer->cancel && observer->cancel->load(std::memory_order_relaxed)) {
+            if (observer && !StopReason(observer).ok()) {
               cancelled = true;
               return;
             }
@@ -425,7 +450,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
         },
         tbb::simple_partitioner());
   });
-  if (cancelled) return absl::CancelledError("extraction cancelled");
+  if (cancelled) return StopReason(observer);
   st.extract_ms = Ms(t0) - join_ms;
   st.join_ms = join_ms;
 

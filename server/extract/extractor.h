@@ -9,6 +9,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <functional>
 
 #include "server/extract/extract_request.h"
@@ -29,8 +30,10 @@ struct ExtractObserver {
   // vertex they use, are final. Calls come one at a time (under the extractor's lock, on one
   // of its threads) with increasing ranges; copy what you need and return quickly.
   std::function<void(const OrderedMesh& mesh, size_t first, size_t end)> on_ready;
-  // Checked between subtrees; once true the extraction stops and returns CANCELLED.
+  // Checked between subtrees (of the budget search's counting passes too): once true, the
+  // extraction stops and returns CANCELLED; once past `deadline`, DEADLINE_EXCEEDED.
   const std::atomic<bool>* cancel = nullptr;
+  std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
 };
 
 // The one-call form. `xf` places the hierarchy cube in world space (volume spacing, origin).

@@ -251,6 +251,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
 
   ExtractObserver observer;
   observer.cancel = cancel;
+  observer.deadline = deadline;  // the budget search and the traversal stop there too
   observer.on_ready = [&](const OrderedMesh& mesh, size_t /*first*/, size_t end) {
     if (cancel->load()) return;
     if (int64_t(end) > settings_.max_triangles) {
@@ -286,6 +287,9 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   lock.unlock();
   if (complete) return absl::OkStatus();
   if (!error.ok()) return error;
+  if (!result.ok() && result.status().code() == absl::StatusCode::kDeadlineExceeded)
+    return absl::DeadlineExceededError("frame took longer than the daemon's deadline of " +
+                                       std::to_string(settings_.deadline_ms) + " ms");
   if (!result.ok() && result.status().code() != absl::StatusCode::kCancelled)
     return result.status();
   counters_->frames_cancelled.fetch_add(1);

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <glm/geometric.hpp>
 #include <limits>
 #include <random>
@@ -323,6 +325,34 @@ TEST(Extract, BudgetPastAnyFrameGivesTheFullResolutionMesh) {
     EXPECT_EQ(res.stats.eps_used, 0) << budget;
     EXPECT_EQ(res.mesh.triangles, full.mesh.triangles) << budget;
   }
+}
+
+// A cancelled or late request stops inside the budget search too (not only between the
+// subtrees of the final extraction), and its unfinished search is not remembered.
+TEST(Extract, BudgetSearchStopsWhenCancelledOrPastItsDeadline) {
+  const auto h = MakeHierarchy(5, BlobsField);
+  BudgetMemo memo;
+  ExtractRequest r = Request({0.2f, 0.5f}, 0, {50, 50, 50});
+  r.budget = 3000;
+  r.budget_memo = &memo;
+  std::atomic<bool> cancel{true};
+  ExtractObserver cancelled;
+  cancelled.cancel = &cancel;
+  auto a = Extract(*h, kGrid, r, &cancelled);
+  ASSERT_FALSE(a.ok());
+  EXPECT_EQ(a.status().code(), absl::StatusCode::kCancelled) << a.status();
+  ExtractObserver late;
+  late.deadline = std::chrono::steady_clock::now() - std::chrono::milliseconds(1);
+  auto b = Extract(*h, kGrid, r, &late);
+  ASSERT_FALSE(b.ok());
+  EXPECT_EQ(b.status().code(), absl::StatusCode::kDeadlineExceeded) << b.status();
+  EXPECT_FALSE(memo.Find(r.isovalues, r.budget).has_value());
+  ExtractObserver in_time;
+  in_time.deadline = std::chrono::steady_clock::now() + std::chrono::hours(1);
+  auto c = Extract(*h, kGrid, r, &in_time);
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_GT(c->stats.budget_passes, 0);
+  EXPECT_TRUE(memo.Find(r.isovalues, r.budget).has_value());
 }
 
 // The eps for a budget does not depend on the view, so a memo answers later views without
