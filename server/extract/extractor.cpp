@@ -91,7 +91,11 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.orthographic = r.view.orthographic;
   // Affine maps keep planes and sides: order in grid space with the eye mapped there.
   c.eye = (r.view.eye - xf.origin) / xf.spacing;
-  c.dir = r.view.direction / xf.spacing;
+  // Only the direction's sense matters: scaled to a largest component of 1 first, so a huge
+  // finite one (1e307) cannot overflow to inf, and 0 * inf to NaN, on the way to grid space.
+  const glm::dvec3& d = r.view.direction;
+  const double d_max = std::max({std::abs(d.x), std::abs(d.y), std::abs(d.z)});
+  c.dir = d_max > 0 ? (d / d_max) / xf.spacing : d;
   c.normals = r.normals;
   c.xf = xf;
   c.world_origin = glm::vec3(xf.origin);

@@ -313,6 +313,24 @@ TEST(Extract, BudgetFindsTheSmallestEpsThatFits) {
   }
 }
 
+// An orthographic direction is a sense, not a length: 1e307 per component (which overflowed
+// once divided by a small spacing) draws what (1, 1, 1) draws, byte for byte.
+TEST(Extract, HugeViewDirectionDrawsAsItsUnitDirection) {
+  const auto h = MakeHierarchy(4, BlobsField);
+  const GridToWorld fine{glm::dvec3(-1.0), glm::dvec3(0.03125)};
+  ExtractRequest unit = Request({0.2f, 0.5f}, 0, {0, 0, 0});
+  unit.view.orthographic = true;
+  unit.view.direction = {1, 1, 1};
+  ExtractRequest huge = unit;
+  huge.view.direction = {1e307, 1e307, 1e307};
+  const auto a = RunExtract(*h, unit, fine), b = RunExtract(*h, huge, fine);
+  EXPECT_GT(a.mesh.triangle_count(), 0u);
+  EXPECT_EQ(a.mesh.triangles, b.mesh.triangles);
+  huge.view.direction = {1e308, 1, 1};
+  unit.view.direction = {1, 1e-308, 1e-308};
+  EXPECT_EQ(RunExtract(*h, unit, fine).mesh.triangles, RunExtract(*h, huge, fine).mesh.triangles);
+}
+
 // A budget larger than any frame (up to the largest int64) means everything: the eps 0 mesh.
 TEST(Extract, BudgetPastAnyFrameGivesTheFullResolutionMesh) {
   const auto h = MakeHierarchy(4, BlobsField);
