@@ -90,14 +90,22 @@ struct ServiceCore {
     std::lock_guard<std::mutex> lock(streams_mu);
     streams[s] = std::move(w);
   }
-  void Unregister(StreamBase* s, bool admitted) {
+  // Forgets a stream gRPC is done with; `release_slot`: it no longer runs a frame job either.
+  void Unregister(StreamBase* s, bool release_slot) {
     std::lock_guard<std::mutex> lock(streams_mu);
     streams.erase(s);
-    if (admitted) {
-      counters.sessions_open.fetch_sub(1);
-      counters.sessions_closed.fetch_add(1);
-    }
+    if (release_slot) ReleaseSlotLocked();
     streams_cv.notify_all();
+  }
+  // The slot of a stream whose frame job outlived it (the job ends, then the slot frees).
+  void ReleaseSlot() {
+    std::lock_guard<std::mutex> lock(streams_mu);
+    ReleaseSlotLocked();
+    streams_cv.notify_all();
+  }
+  void ReleaseSlotLocked() {
+    counters.sessions_open.fetch_sub(1);
+    counters.sessions_closed.fetch_add(1);
   }
 
   // Ends Session streams that have been idle for config.limits.idle_timeout_s: a thread that
@@ -241,7 +249,15 @@ class ChunkStream : public Reactor, public StreamBase {
 
   void OnDone() override {
     if (admitted_) spdlog::debug("{}: stream closed ({})", peer_, finish_status_.error_message());
-    core_->Unregister(this, admitted_);
+    // A frame job still running (cancelled, winding down) keeps the slot until it ends:
+    // otherwise clients that leave at once could keep any number of jobs running.
+    bool release;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      done_ = true;
+      release = admitted_ && !job_running_;
+    }
+    core_->Unregister(this, release);
     std::shared_ptr<StreamBase> keep = std::move(self_);  // may destroy *this on return
   }
 
@@ -277,6 +293,7 @@ class ChunkStream : public Reactor, public StreamBase {
   // Runs the pending view, then any view that arrived meanwhile (only the latest is kept),
   // on a frame-pool thread. One job per stream at a time.
   void RunJobs() override {
+    bool release_slot = false;
     for (;;) {
       pb::ViewRequest view;
       ExtractRequest request;
@@ -288,6 +305,7 @@ class ChunkStream : public Reactor, public StreamBase {
         if (!pending_ || finishing_) {
           pending_.reset();
           job_running_ = false;
+          release_slot = done_ && admitted_;  // OnDone left the slot to this job
           last_activity_ = Clock::now();
           CompleteIfIdleLocked();
           break;
@@ -310,6 +328,10 @@ class ChunkStream : public Reactor, public StreamBase {
           FailLocked(ToGrpc(s));
         }
       }
+    }
+    if (release_slot) {
+      core_->ReleaseSlot();
+      return;  // gRPC is done with the call: nothing to finish
     }
     std::optional<grpc::Status> finish;
     {
@@ -421,6 +443,7 @@ class ChunkStream : public Reactor, public StreamBase {
   std::shared_ptr<std::atomic<bool>> cancel_ = std::make_shared<std::atomic<bool>>(false);
   std::optional<Pending> pending_;
   bool job_running_ = false;
+  bool done_ = false;        // gRPC called OnDone
   bool reads_done_ = false;  // no more requests will come
   bool draining_ = false;
   bool finishing_ = false;
@@ -554,19 +577,25 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
   absl::Status known = core_->catalogue.Check(request->name());
   if (known.ok() && (bins < 1 || bins > 4096))
     known = absl::InvalidArgumentError("histogram_bins must be in 1..4096");
+  // Preparing may build a hierarchy (seconds) and the histogram reads every sample: the call
+  // takes a stream slot like a frame (so a flood of them is refused, not queued ahead of
+  // frames), and a caller that gives up stops it.
+  if (known.ok()) known = core_->Admit();
   if (!known.ok()) {
     reactor->Finish(ToGrpc(known));
     return reactor;
   }
-  // Preparing may build a hierarchy (seconds): off gRPC's threads.
   ServiceCore* core = core_.get();
   const std::string name = request->name();
-  core_->frames->Submit([core, name, bins, reactor, response] {
+  core_->frames->Submit([core, name, bins, reactor, response, context] {
+    const auto finish = [&](const grpc::Status& status) {
+      core->ReleaseSlot();
+      reactor->Finish(status);
+    };
+    const grpc::Status gone(grpc::StatusCode::CANCELLED, "cancelled by the client");
+    if (context->IsCancelled()) return finish(gone);
     auto served = core->catalogue.Get(name);
-    if (!served.ok()) {
-      reactor->Finish(ToGrpc(served.status()));
-      return;
-    }
+    if (!served.ok()) return finish(ToGrpc(served.status()));
     const Volume& v = *(*served)->prepared.volume;
     const Hierarchy& h = *(*served)->prepared.hierarchy;
     response->set_name(name);
@@ -584,14 +613,16 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
     std::vector<uint64_t> counts(size_t(bins), 0);
     const double lo = v.min_value, width = double(v.max_value) - v.min_value;
     const auto& d = h.data_dims();
-    for (int z = 0; z < d[2]; ++z)
+    for (int z = 0; z < d[2]; ++z) {
+      if (context->IsCancelled()) return finish(gone);
       for (int y = 0; y < d[1]; ++y)
         for (int x = 0; x < d[0]; ++x) {
           const double t = width > 0 ? (h.sample(x, y, z) - lo) / width : 0.0;
           ++counts[std::min(size_t(bins) - 1, size_t(std::max(0.0, t * bins)))];
         }
+    }
     for (uint64_t c : counts) response->add_histogram(c);
-    reactor->Finish(grpc::Status::OK);
+    finish(grpc::Status::OK);
   });
   return reactor;
 }
