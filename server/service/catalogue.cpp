@@ -9,6 +9,14 @@
 namespace isostream::service {
 namespace {
 
+// A client's volume name as error messages quote it: shortened, so a long name cannot push
+// the status past gRPC's metadata limit (the client would see RESOURCE_EXHAUSTED instead).
+std::string Quoted(const std::string& name) {
+  constexpr size_t kShown = 100;
+  if (name.size() <= kShown) return "'" + name + "'";
+  return "'" + name.substr(0, kShown) + "...' (" + std::to_string(name.size()) + " bytes)";
+}
+
 bool AllDigits(const std::string& s) {
   return !s.empty() && s.size() <= 9 &&
          std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
@@ -24,21 +32,22 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim) {
   const bool known = std::find_if(std::begin(kKinds), std::end(kKinds),
                                   [&](const char* k) { return kind == k; }) != std::end(kKinds);
   if (!known || colon == std::string::npos)
-    return absl::NotFoundError("unknown volume '" + spec +
-                               "': this daemon has no catalogue and serves the generators "
+    return absl::NotFoundError("unknown volume " + Quoted(spec) +
+                               ": this daemon has no catalogue and serves the generators "
                                "cayley:N, buckyball:N, sphere:N, shells:N, noise:N[:SEED]");
   std::string rest = spec.substr(colon + 1);
   const size_t seed_colon = rest.find(':');
   if (seed_colon != std::string::npos) {
     if (kind != "noise" || !AllDigits(rest.substr(seed_colon + 1)))
-      return absl::NotFoundError("unknown volume '" + spec + "'");
+      return absl::NotFoundError("unknown volume " + Quoted(spec));
     rest = rest.substr(0, seed_colon);
   }
-  if (!AllDigits(rest)) return absl::NotFoundError("unknown volume '" + spec + "'");
+  if (!AllDigits(rest)) return absl::NotFoundError("unknown volume " + Quoted(spec));
   const long n = std::stol(rest);
   if (n < 2 || n > max_dim)
-    return absl::NotFoundError("unknown volume '" + spec + "': generators are served with 2.." +
-                               std::to_string(max_dim) + " samples per axis");
+    return absl::NotFoundError("unknown volume " + Quoted(spec) +
+                               ": generators are served with 2.." + std::to_string(max_dim) +
+                               " samples per axis");
   return absl::OkStatus();
 }
 
@@ -68,7 +77,8 @@ absl::Status VolumeCatalogue::Check(const std::string& name) const {
   if (name.empty()) return absl::InvalidArgumentError("no volume named");
   if (options_.volumes.empty()) return CheckGeneratorSpec(name, options_.max_generator_dim);
   if (!options_.volumes.count(name))
-    return absl::NotFoundError("unknown volume '" + name + "' (ListVolumes gives the catalogue)");
+    return absl::NotFoundError("unknown volume " + Quoted(name) +
+                               " (ListVolumes gives the catalogue)");
   return absl::OkStatus();
 }
 
@@ -96,7 +106,7 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
     // entries and is not shown to clients.
     if (options_.volumes.empty()) return prepared.status();
     return absl::Status(prepared.status().code(),
-                        "volume '" + name + "' could not be prepared (see the daemon's log)");
+                        "volume " + Quoted(name) + " could not be prepared (see the daemon's log)");
   }
   auto served = std::make_shared<ServedVolume>();
   served->name = name;

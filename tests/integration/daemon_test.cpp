@@ -237,15 +237,23 @@ TEST_F(Daemon, StatusCodes) {
   auto c = Connect();
   const glm::dvec3 eye(2, 2, 2);
   auto code = [&](const pb::ViewRequest& v) { return c->Fetch(v).status(); };
+  absl::Status s;
 
   // Unknown names, paths and oversized generators are all just "not in the catalogue".
   for (const char* name : {"nope", "/etc/passwd", "../x.vdb", "buckyball:4097", "raw:/x:2x2x2:f32"})
     EXPECT_EQ(code(MakeView(name, 1, 0.01, eye)).code(), absl::StatusCode::kNotFound) << name;
   EXPECT_EQ(c->GetVolumeInfo("nope").status().code(), absl::StatusCode::kNotFound);
+  // A name too long to quote whole in the status is shortened there (whole, it overflowed the
+  // status metadata and the client saw RESOURCE_EXHAUSTED).
+  const std::string long_name(20000, 'a');
+  s = code(MakeView(long_name, 1, 0.01, eye));
+  EXPECT_EQ(s.code(), absl::StatusCode::kNotFound) << s;
+  EXPECT_NE(s.message().find("(20000 bytes)"), std::string::npos) << s;
+  EXPECT_EQ(c->GetVolumeInfo(long_name).status().code(), absl::StatusCode::kNotFound);
 
   pb::ViewRequest no_surfaces = MakeView("buckyball:65", 1, 0.01, eye);
   no_surfaces.clear_surfaces();
-  absl::Status s = code(no_surfaces);
+  s = code(no_surfaces);
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_FALSE(s.message().empty());
 
@@ -369,10 +377,16 @@ TEST_F(Daemon, SessionLimitIsResourceExhausted) {
   EXPECT_EQ((*extra)->Finish().code(), absl::StatusCode::kResourceExhausted);
   EXPECT_EQ(c->Fetch(MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2))).status().code(),
             absl::StatusCode::kResourceExhausted);
+  // Volume info (which may build a hierarchy and reads every sample) takes a slot too: a
+  // flood of it is refused rather than queued ahead of frames.
+  EXPECT_EQ(c->GetVolumeInfo("buckyball:65").status().code(), absl::StatusCode::kResourceExhausted);
   for (auto& s : open) {
     ASSERT_TRUE(s->CloseSend().ok());
     EXPECT_TRUE(s->Finish().ok());
   }
+  EXPECT_TRUE(
+      WaitForStats(c.get(), [](const pb::ServerStats& st) { return st.sessions_open() == 0; }));
+  EXPECT_TRUE(c->GetVolumeInfo("buckyball:65").ok());
   EXPECT_TRUE(
       WaitForStats(c.get(), [](const pb::ServerStats& st) { return st.sessions_open() == 0; }));
 }
