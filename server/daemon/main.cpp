@@ -121,7 +121,7 @@ int main(int argc, char** argv) {
   std::string config_file, listen, cache_dir, tls_cert, tls_key, token, log_level;
   std::vector<std::string> volumes;
   int threads = 0, max_sessions = 0, max_isovalues = 0, max_dim = 0, chunk_triangles = 0;
-  int64_t max_triangles = 0, deadline_ms = 0, idle_timeout_s = 0;
+  int64_t max_triangles = 0, deadline_ms = 0, idle_timeout_s = 0, cache_max_mb = 0;
   bool no_cache = false;
   app.add_option("--config", config_file, "JSON config file (flags override it)");
   auto* o_listen = app.add_option("--listen", listen,
@@ -144,6 +144,9 @@ int main(int argc, char** argv) {
                                 "many seconds (default 300; 0: never)");
   auto* o_cache = app.add_option("--cache-dir", cache_dir, "hierarchy cache directory");
   auto* o_nocache = app.add_flag("--no-cache", no_cache, "never read or write the cache");
+  auto* o_cache_max = app.add_option("--cache-max-mb", cache_max_mb,
+                                     "cache size cap; least recently used entries go (default "
+                                     "16384)");
   auto* o_cert = app.add_option("--tls-cert", tls_cert, "PEM certificate chain (enables TLS)");
   auto* o_key = app.add_option("--tls-key", tls_key, "PEM private key");
   auto* o_token =
@@ -187,6 +190,7 @@ int main(int argc, char** argv) {
   if (*o_idle) config.limits.idle_timeout_s = idle_timeout_s;
   if (*o_cache) config.cache_dir = cache_dir;
   if (*o_nocache) config.no_cache = no_cache;
+  if (*o_cache_max) config.cache_max_mb = cache_max_mb;
   if (*o_cert) config.tls_cert = tls_cert;
   if (*o_key) config.tls_key = tls_key;
   if (*o_token) config.token = token;

@@ -3,12 +3,14 @@
 #include <unistd.h>
 #include <xxhash.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <vector>
 
 namespace isostream {
 namespace {
@@ -113,6 +115,37 @@ bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples
   return true;
 }
 
+// Removes the least recently used entries of `dir` (not `keep`) until they total at most
+// max_bytes. Entries are the files this cache writes; anything else in the directory is left
+// alone. Failures (a file removed meanwhile by another process) are skipped.
+void EvictBeyond(const std::string& dir, uint64_t max_bytes, const std::string& keep) {
+  struct Entry {
+    std::filesystem::file_time_type used;
+    uint64_t bytes;
+    std::filesystem::path path;
+  };
+  std::vector<Entry> entries;
+  uint64_t total = 0;
+  std::error_code ec;
+  for (const auto& f : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string name = f.path().filename().string();
+    if (name.rfind("hierarchy-v", 0) != 0 || f.path().extension() != ".eta") continue;
+    std::error_code e1, e2;
+    const uint64_t bytes = f.file_size(e1);
+    const auto used = f.last_write_time(e2);
+    if (e1 || e2) continue;
+    total += bytes;
+    if (f.path() != std::filesystem::path(keep)) entries.push_back({used, bytes, f.path()});
+  }
+  std::sort(entries.begin(), entries.end(),
+            [](const Entry& a, const Entry& b) { return a.used < b.used; });
+  for (const Entry& e : entries) {
+    if (total <= max_bytes) break;
+    std::error_code e1;
+    if (std::filesystem::remove(e.path, e1)) total -= e.bytes;
+  }
+}
+
 std::string PathFor(const std::string& dir, int k, uint64_t samples_hash) {
   char name[64];
   std::snprintf(name, sizeof(name), "hierarchy-v%u-k%d-%016llx.eta", kHierarchyCacheVersion, k,
@@ -162,6 +195,8 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   const std::string path = PathFor(cache.dir, samples.k, hash);
   UninitializedVector<uint16_t> eta;
   if (ReadCache(path, samples, hash, &eta, &reason)) {
+    std::error_code ec;  // a hit is a use: the eviction order is by this time
+    std::filesystem::last_write_time(path, std::filesystem::file_time_type::clock::now(), ec);
     if (outcome) *outcome = CacheOutcome::kHit;
     if (why) *why = "loaded " + path;
     return AssembleHierarchy(std::move(samples), eta);
@@ -169,7 +204,11 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   result = std::filesystem::exists(path) ? CacheOutcome::kInvalidRebuilt : CacheOutcome::kMissBuilt;
   ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built, BuildHierarchy(std::move(samples), build));
   std::string write_why;
-  if (!WriteCache(path, *built, hash, &write_why)) reason += "; " + write_why;
+  if (!WriteCache(path, *built, hash, &write_why)) {
+    reason += "; " + write_why;
+  } else if (cache.max_bytes > 0) {
+    EvictBeyond(cache.dir, cache.max_bytes, path);
+  }
   if (outcome) *outcome = result;
   if (why) *why = reason + " -> " + path;
   return built;

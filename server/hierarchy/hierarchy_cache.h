@@ -20,6 +20,10 @@ const char* CacheOutcomeName(CacheOutcome outcome);
 
 struct HierarchyCacheOptions {
   std::string dir;  // empty: no cache
+  // After a store, the least recently used entries (by modification time, which a hit
+  // refreshes) are removed until the cache's entries total at most this many bytes; the one
+  // just stored stays. 0: no cap. The daemon sets one: its clients name the volumes.
+  uint64_t max_bytes = 0;
 };
 
 // Default cache directory: $ISOSTREAM_CACHE_DIR, else $XDG_CACHE_HOME/isostream, else

@@ -35,13 +35,14 @@ absl::Status Get(const json& object, const char* key, const std::string& where, 
 absl::Status Parse(const json& j, DaemonConfig* c) {
   ISOSTREAM_RETURN_IF_ERROR(
       CheckKeys(j,
-                {"listen", "threads", "cache_dir", "no_cache", "volumes", "token", "tls", "limits",
-                 "frames", "log_level", "shutdown_grace_ms"},
+                {"listen", "threads", "cache_dir", "no_cache", "cache_max_mb", "volumes", "token",
+                 "tls", "limits", "frames", "log_level", "shutdown_grace_ms"},
                 ""));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "listen", "", &c->listen));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "threads", "", &c->threads));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "cache_dir", "", &c->cache_dir));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "no_cache", "", &c->no_cache));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "cache_max_mb", "", &c->cache_max_mb));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "volumes", "", &c->volumes));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "token", "", &c->token));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "log_level", "", &c->log_level));
@@ -97,6 +98,8 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   auto bad = [](const std::string& m) { return absl::InvalidArgumentError(m); };
   if (c.threads < 0 || c.threads > 1024) return bad("threads must be in 0..1024");
   if (c.limits.max_sessions < 1) return bad("max_sessions must be at least 1");
+  if (c.cache_max_mb < 1 || c.cache_max_mb > (int64_t{1} << 30))
+    return bad("cache_max_mb must be in 1..1073741824");
   if (c.limits.max_triangles < 1) return bad("max_triangles must be at least 1");
   if (c.limits.max_isovalues < 1 || c.limits.max_isovalues > 16)
     return bad("max_isovalues must be in 1..16");

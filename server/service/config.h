@@ -25,6 +25,9 @@ struct DaemonConfig {
   int threads = 0;        // extraction threads per frame and encoder threads; 0: all cores
   std::string cache_dir;  // empty: the default cache directory
   bool no_cache = false;
+  // The cache keeps at most this much (least recently used entries go first): clients name
+  // the generated volumes it stores, so without a cap they could fill the disk.
+  int64_t cache_max_mb = 16384;
   Limits limits;
   // Catalogue: name -> volume spec (generator, .vdb, .nii, raw:...). Clients see names only.
   std::map<std::string, std::string> volumes;
@@ -42,6 +45,7 @@ struct DaemonConfig {
 
 // Reads a JSON config file over `config` (keys absent from the file keep their value):
 //   {"listen": "127.0.0.1:7878", "threads": 2, "cache_dir": "/var/cache/isostream",
+//    "cache_max_mb": 16384,
 //    "volumes": {"head": "/data/head.nii.gz"}, "token": "...",
 //    "tls": {"cert": "server.pem", "key": "server.key"},
 //    "limits": {"max_sessions": 16, "max_triangles": 4000000, "max_isovalues": 16,

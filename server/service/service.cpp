@@ -35,6 +35,7 @@ struct ServiceCore {
           o.max_generator_dim = c.limits.max_dim;
           o.limits.max_dim = c.volumes.empty() ? c.limits.max_dim : VolumeLimits{}.max_dim;
           if (!c.no_cache) o.cache.dir = c.cache_dir.empty() ? DefaultCacheDir() : c.cache_dir;
+          o.cache.max_bytes = uint64_t(c.cache_max_mb) << 20;
           o.build_threads = c.threads;
           return o;
         }()),

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -68,6 +69,36 @@ TEST_F(HierarchyCacheTest, FileHoldsTheStoredCodes) {
   const HierarchyPtr b = Get(Samples(5, 0), &outcome);
   EXPECT_EQ(outcome, CacheOutcome::kHit);
   EXPECT_EQ(a->LinearEtaCodes(), b->LinearEtaCodes());
+}
+
+// With a cap, a store removes the least recently used entries (a hit counts as a use) until
+// the entries fit; the new entry and files that are not entries stay.
+TEST_F(HierarchyCacheTest, CapEvictsTheLeastRecentlyUsed) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);
+  const std::string a = HierarchyCachePath(cache_.dir, Samples(4, 0));
+  const std::string b = HierarchyCachePath(cache_.dir, Samples(4, 1));
+  const std::string c = HierarchyCachePath(cache_.dir, Samples(4, 2));
+  cache_.max_bytes = 2 * fs::file_size(a) + fs::file_size(a) / 2;  // room for two entries
+  Get(Samples(4, 1), &outcome);
+  EXPECT_EQ(outcome, CacheOutcome::kMissBuilt);
+  const auto now = fs::file_time_type::clock::now();
+  fs::last_write_time(a, now - std::chrono::seconds(20));
+  fs::last_write_time(b, now - std::chrono::seconds(10));
+  std::ofstream(dir_ / "notes.txt") << "not an entry";
+  Get(Samples(4, 0), &outcome);  // a is used again: b is now the least recently used
+  EXPECT_EQ(outcome, CacheOutcome::kHit);
+  Get(Samples(4, 2), &outcome);
+  EXPECT_EQ(outcome, CacheOutcome::kMissBuilt);
+  EXPECT_TRUE(fs::exists(a));
+  EXPECT_FALSE(fs::exists(b));
+  EXPECT_TRUE(fs::exists(c));
+  EXPECT_TRUE(fs::exists(dir_ / "notes.txt"));
+  cache_.max_bytes = 1;  // smaller than any entry: only the newest stays
+  Get(Samples(4, 1), &outcome);
+  EXPECT_FALSE(fs::exists(a));
+  EXPECT_TRUE(fs::exists(b));
+  EXPECT_FALSE(fs::exists(c));
 }
 
 TEST_F(HierarchyCacheTest, ChangedSamplesAreNotServedFromCache) {
