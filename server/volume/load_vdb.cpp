@@ -1,10 +1,12 @@
 // OpenVDB files: one float grid becomes a Volume over its active bounding box.
 #include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
 #include <openvdb/math/Maps.h>
 #include <tbb/combinable.h>
 
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <limits>
 #include <mutex>
 #include <string>
@@ -121,6 +123,8 @@ absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string
       break;
     }
   }
+  if (metadata->empty())
+    return absl::DataLossError(path + ": holds no grids (an empty or truncated file)");
   if (chosen == nullptr) {
     if (!grid_name.empty())
       return absl::NotFoundError(path + ": no grid named '" + grid_name + "'");
@@ -150,8 +154,21 @@ absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string
 
   openvdb::FloatGrid::Ptr grid;
   try {
-    grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(chosen->getName()));
-    file.close();
+    if (metadata->size() == 1) {
+      // OpenVDB does not check that its reads were complete: a file missing its last few
+      // bytes loads with garbage in its last voxels. Through our own stream the short read
+      // shows (a single grid: the stream reads every grid, which is then just this one).
+      file.close();
+      std::ifstream in(path, std::ios::binary);
+      openvdb::io::Stream stream(in, /*delayLoad=*/false);
+      const openvdb::GridPtrVecPtr grids = stream.getGrids();
+      if (!in) return absl::DataLossError(where + ": truncated grid data");
+      if (grids && grids->size() == 1)
+        grid = openvdb::gridPtrCast<openvdb::FloatGrid>(grids->front());
+    } else {
+      grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(chosen->getName()));
+      file.close();
+    }
   } catch (const std::exception& e) {
     return absl::DataLossError(where + ": corrupt or truncated grid data: " + e.what());
   }

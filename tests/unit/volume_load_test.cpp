@@ -503,7 +503,8 @@ TEST(VolumeLoadErrors, TruncatedData) {
 
   const std::string vdb = WriteVdb("whole.vdb", {TestGrid("density", 1.0f)});
   std::vector<unsigned char> bytes = ReadBytes(vdb);
-  for (size_t keep : {bytes.size() / 2, bytes.size() - 10}) {
+  // OpenVDB itself misses a tail of 1-7 bytes (the last voxels read as garbage).
+  for (size_t keep : {bytes.size() / 2, bytes.size() - 10, bytes.size() - 7, bytes.size() - 1}) {
     path = ScratchPath("short_" + std::to_string(keep) + ".vdb");
     WriteBytes(path, std::vector<unsigned char>(bytes.begin(), bytes.begin() + keep));
     ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, path);
