@@ -162,9 +162,9 @@ const char* CacheOutcomeName(CacheOutcome outcome) {
     case CacheOutcome::kHit:
       return "hit";
     case CacheOutcome::kMissBuilt:
-      return "miss (built and stored)";
+      return "miss (built)";
     case CacheOutcome::kInvalidRebuilt:
-      return "invalid (rebuilt and replaced)";
+      return "invalid (rebuilt)";
   }
   return "?";
 }
@@ -204,13 +204,15 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   result = std::filesystem::exists(path) ? CacheOutcome::kInvalidRebuilt : CacheOutcome::kMissBuilt;
   ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built, BuildHierarchy(std::move(samples), build));
   std::string write_why;
+  // The outcome says what was read; the note says whether the new entry was stored.
   if (!WriteCache(path, *built, hash, &write_why)) {
-    reason += "; " + write_why;
-  } else if (cache.max_bytes > 0) {
-    EvictBeyond(cache.dir, cache.max_bytes, path);
+    reason += "; not stored: " + write_why;
+  } else {
+    reason += "; stored " + path;
+    if (cache.max_bytes > 0) EvictBeyond(cache.dir, cache.max_bytes, path);
   }
   if (outcome) *outcome = result;
-  if (why) *why = reason + " -> " + path;
+  if (why) *why = reason;
   return built;
 }
 

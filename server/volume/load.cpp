@@ -42,9 +42,10 @@ absl::StatusOr<VolumePtr> LoadFromSpec(std::string_view spec, const VolumeLimits
 
   std::string path = spec_text;
   std::string grid_name;
-  const size_t hash = spec.rfind('#');
-  if (hash != std::string_view::npos && EndsWith(spec.substr(0, hash), ".vdb") &&
-      !CheckInputFile(spec_text).ok()) {
+  // PATH.vdb#GRID: the grid name is everything after the first ".vdb#" (it may hold '#').
+  const size_t vdb_hash = spec.find(".vdb#");
+  if (vdb_hash != std::string_view::npos && !CheckInputFile(spec_text).ok()) {
+    const size_t hash = vdb_hash + 4;
     path = spec_text.substr(0, hash);
     grid_name = spec_text.substr(hash + 1);
   }

@@ -408,6 +408,11 @@ TEST(VolumeLoadVdb, FirstFloatGridAndNamedGrid) {
       return scale * (i * 3 + j * 5 - k * 7);
     });
   }
+  // A grid name may hold '#': everything after the first ".vdb#" names the grid.
+  const std::string hashed = WriteVdb("hashed.vdb", {TestGrid("heat#2", 2.0f)});
+  absl::StatusOr<VolumePtr> v = LoadVolume(hashed + "#heat#2");
+  ASSERT_TRUE(v.ok()) << v.status();
+  ExpectError(LoadVolume(hashed + "#heat"), absl::StatusCode::kNotFound, "no grid named 'heat'");
 }
 
 TEST(VolumeLoadVdb, TilesAndBackgroundInsideTheBox) {
