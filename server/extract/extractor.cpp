@@ -91,9 +91,17 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.orthographic = r.view.orthographic;
   // Affine maps keep planes and sides: order in grid space with the eye mapped there.
   c.eye = (r.view.eye - xf.origin) / xf.spacing;
+  glm::dvec3 d = r.view.direction;
+  const double eye_far = std::max({std::abs(c.eye.x), std::abs(c.eye.y), std::abs(c.eye.z)});
+  if (!c.orthographic && !(eye_far <= 0x1p52)) {
+    // So far that grid points' offsets from the eye are lost (or its grid coordinates
+    // overflow, and the plane sides would turn NaN): the volume is seen as from infinity,
+    // which is the orthographic view along the direction from the eye to it.
+    c.orthographic = true;
+    d = xf.origin + xf.spacing * (0.5 * double(1 << c.k)) - r.view.eye;
+  }
   // Only the direction's sense matters: scaled to a largest component of 1 first, so a huge
   // finite one (1e307) cannot overflow to inf, and 0 * inf to NaN, on the way to grid space.
-  const glm::dvec3& d = r.view.direction;
   const double d_max = std::max({std::abs(d.x), std::abs(d.y), std::abs(d.z)});
   c.dir = d_max > 0 ? (d / d_max) / xf.spacing : d;
   c.normals = r.normals;

@@ -289,12 +289,17 @@ TEST(Extract, FarPerspectiveEyeDrawsAsOrthographic) {
     EXPECT_EQ(got.mesh.triangles, want.mesh.triangles) << far;
     EXPECT_EQ(got.mesh.positions, want.mesh.positions) << far;
   }
-  // A finite eye whose grid coordinates overflow (world spacing 1e-200): the plane sides turn
-  // to +-inf or NaN, which must still give a complete frame, not a crash or an empty one.
+  // Finite eyes whose grid coordinates overflow (world spacing 1e-200; an eye at 1e307 with
+  // spacing 1/32): the plane sides would turn to +-inf or NaN and the frame come out
+  // mis-ordered; they draw as the orthographic view does.
   GridToWorld tiny;
   tiny.spacing = glm::dvec3(1e-200);
   const auto overflow = RunExtract(*h, Request({0.0f}, 0.004, -1e200 * d), tiny);
-  EXPECT_EQ(overflow.mesh.triangle_count(), want.mesh.triangle_count());
+  EXPECT_EQ(overflow.mesh.triangles, RunExtract(*h, ortho, tiny).mesh.triangles);
+  GridToWorld fine;
+  fine.spacing = glm::dvec3(1.0 / 32);
+  const auto huge = RunExtract(*h, Request({0.0f}, 0.004, -1e307 * d), fine);
+  EXPECT_EQ(huge.mesh.triangles, RunExtract(*h, ortho, fine).mesh.triangles);
 }
 
 TEST(Extract, BudgetFindsTheSmallestEpsThatFits) {
