@@ -1,5 +1,6 @@
 #include "server/hierarchy/hierarchy_cache.h"
 
+#include <signal.h>
 #include <unistd.h>
 #include <xxhash.h>
 
@@ -129,13 +130,26 @@ void EvictBeyond(const std::string& dir, uint64_t max_bytes, const std::string& 
   std::error_code ec;
   for (const auto& f : std::filesystem::directory_iterator(dir, ec)) {
     const std::string name = f.path().filename().string();
-    if (name.rfind("hierarchy-v", 0) != 0 || f.path().extension() != ".eta") continue;
+    if (name.rfind("hierarchy-v", 0) != 0) continue;
     std::error_code e1, e2;
     const uint64_t bytes = f.file_size(e1);
     const auto used = f.last_write_time(e2);
     if (e1 || e2) continue;
-    total += bytes;
-    if (f.path() != std::filesystem::path(keep)) entries.push_back({used, bytes, f.path()});
+    if (f.path().extension() == ".eta") {
+      total += bytes;
+      if (f.path() != std::filesystem::path(keep)) entries.push_back({used, bytes, f.path()});
+      continue;
+    }
+    // "NAME.eta.tmp.PID": a write in progress counts; one whose writer died (killed mid-write)
+    // would stay forever, and goes.
+    const size_t tmp = name.rfind(".eta.tmp.");
+    if (tmp == std::string::npos) continue;
+    const long pid = std::strtol(name.c_str() + tmp + 9, nullptr, 10);
+    if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) {
+      std::filesystem::remove(f.path(), e1);
+    } else {
+      total += bytes;
+    }
   }
   std::sort(entries.begin(), entries.end(),
             [](const Entry& a, const Entry& b) { return a.used < b.used; });
@@ -145,6 +159,14 @@ void EvictBeyond(const std::string& dir, uint64_t max_bytes, const std::string& 
     if (std::filesystem::remove(e.path, e1)) total -= e.bytes;
   }
 }
+
+}  // namespace
+
+void TrimHierarchyCache(const HierarchyCacheOptions& cache) {
+  if (!cache.dir.empty() && cache.max_bytes > 0) EvictBeyond(cache.dir, cache.max_bytes, "");
+}
+
+namespace {
 
 std::string PathFor(const std::string& dir, int k, uint64_t samples_hash) {
   char name[64];

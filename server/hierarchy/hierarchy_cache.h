@@ -38,6 +38,10 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
                                                   CacheOutcome* outcome = nullptr,
                                                   std::string* why = nullptr);
 
+// Applies cache.max_bytes now (the daemon at start: a cap lowered since the last run), and
+// removes entries left half-written by a process that died. No-op without a cap.
+void TrimHierarchyCache(const HierarchyCacheOptions& cache);
+
 // The path a given sample set is cached under (for tests and `isostream info`).
 std::string HierarchyCachePath(const std::string& dir, const PaddedSamples& samples);
 

@@ -71,7 +71,9 @@ void QuantizationFor(const Volume& v, QuantizationBox* box, int* bits) {
   *bits = b;
 }
 
-VolumeCatalogue::VolumeCatalogue(CatalogueOptions options) : options_(std::move(options)) {}
+VolumeCatalogue::VolumeCatalogue(CatalogueOptions options) : options_(std::move(options)) {
+  TrimHierarchyCache(options_.cache);  // the cap holds from the start, not from the first store
+}
 
 absl::Status VolumeCatalogue::Check(const std::string& name) const {
   if (name.empty()) return absl::InvalidArgumentError("no volume named");

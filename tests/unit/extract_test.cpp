@@ -334,6 +334,11 @@ TEST(Extract, HugeViewDirectionDrawsAsItsUnitDirection) {
   huge.view.direction = {1e308, 1, 1};
   unit.view.direction = {1, 1e-308, 1e-308};
   EXPECT_EQ(RunExtract(*h, unit, fine).mesh.triangles, RunExtract(*h, huge, fine).mesh.triangles);
+  // Subnormal components are a direction too (their squares underflow to a zero length).
+  ExtractRequest tiny = unit;
+  tiny.view.direction = {1e-320, 1e-320, 1e-320};
+  unit.view.direction = {1, 1, 1};
+  EXPECT_EQ(RunExtract(*h, tiny, fine).mesh.triangles, a.mesh.triangles);
 }
 
 // A budget larger than any frame (up to the largest int64) means everything: the eps 0 mesh.

@@ -3,6 +3,7 @@
 #include "server/hierarchy/hierarchy_cache.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
@@ -99,6 +100,18 @@ TEST_F(HierarchyCacheTest, CapEvictsTheLeastRecentlyUsed) {
   EXPECT_FALSE(fs::exists(a));
   EXPECT_TRUE(fs::exists(b));
   EXPECT_FALSE(fs::exists(c));
+  // Trimming applies the cap without a store; a half-written entry whose writer died goes,
+  // one whose writer lives (this process) stays.
+  const fs::path dead = dir_ / (fs::path(b).filename().string() + ".tmp.999999999");
+  const fs::path live =
+      dir_ / (fs::path(b).filename().string() + ".tmp." + std::to_string(::getpid()));
+  std::ofstream(dead) << "half";
+  std::ofstream(live) << "half";
+  cache_.max_bytes = 1;
+  TrimHierarchyCache(cache_);
+  EXPECT_FALSE(fs::exists(b));
+  EXPECT_FALSE(fs::exists(dead));
+  EXPECT_TRUE(fs::exists(live));
 }
 
 TEST_F(HierarchyCacheTest, ChangedSamplesAreNotServedFromCache) {
