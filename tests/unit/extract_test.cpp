@@ -355,14 +355,20 @@ TEST(Extract, BudgetPastAnyFrameGivesTheFullResolutionMesh) {
   }
 }
 
+// A budget of 3000 triangles whose eps is remembered in `memo`.
+ExtractRequest RememberingBudgetRequest(std::vector<float> isovalues, BudgetMemo* memo) {
+  ExtractRequest r = Request(std::move(isovalues), 0, {50, 50, 50});
+  r.budget = 3000;
+  r.budget_memo = memo;
+  return r;
+}
+
 // A cancelled or late request stops inside the budget search too (not only between the
 // subtrees of the final extraction), and its unfinished search is not remembered.
 TEST(Extract, BudgetSearchStopsWhenCancelledOrPastItsDeadline) {
   const auto h = MakeHierarchy(5, BlobsField);
   BudgetMemo memo;
-  ExtractRequest r = Request({0.2f, 0.5f}, 0, {50, 50, 50});
-  r.budget = 3000;
-  r.budget_memo = &memo;
+  const ExtractRequest r = RememberingBudgetRequest({0.2f, 0.5f}, &memo);
   std::atomic<bool> cancel{true};
   ExtractObserver cancelled;
   cancelled.cancel = &cancel;
@@ -388,9 +394,7 @@ TEST(Extract, BudgetSearchStopsWhenCancelledOrPastItsDeadline) {
 TEST(Extract, BudgetMemoSkipsTheSearchForLaterViews) {
   const auto h = MakeHierarchy(5, BlobsField);
   BudgetMemo memo;
-  ExtractRequest r = Request({0.5f, 0.2f}, 0, {50, 50, 50});
-  r.budget = 3000;
-  r.budget_memo = &memo;
+  const ExtractRequest r = RememberingBudgetRequest({0.5f, 0.2f}, &memo);
   const auto first = RunExtract(*h, r);
   EXPECT_GT(first.stats.budget_passes, 0);
 
