@@ -16,9 +16,9 @@
 #include <fstream>
 #include <sstream>
 
-#include "shared/malloc_tuning.h"
 #include "server/service/config.h"
 #include "server/service/service.h"
+#include "shared/malloc_tuning.h"
 
 namespace {
 

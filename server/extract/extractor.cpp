@@ -130,9 +130,9 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
     // always. Not a number (an eye whose grid coordinates overflow): never.
     const double eye_side = glm::dot(n, c.eye);
     constexpr double kFar = 1099511627776.0;  // 2^40
-    c.plane_at_least[i] = !(eye_side <= kFar)  ? std::numeric_limits<int64_t>::max()
-                          : eye_side < -kFar ? std::numeric_limits<int64_t>::min()
-                                             : int64_t(std::ceil(eye_side));
+    c.plane_at_least[i] = !(eye_side <= kFar) ? std::numeric_limits<int64_t>::max()
+                          : eye_side < -kFar  ? std::numeric_limits<int64_t>::min()
+                                              : int64_t(std::ceil(eye_side));
     c.ortho_child0_first[i] = glm::dot(n, c.dir) >= 0;  // eye on child 1's side of every plane
   }
   for (int level = 0; level <= 3 * c.k; ++level)

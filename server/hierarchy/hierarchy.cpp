@@ -50,10 +50,10 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
-#include <new>
-#include <string>
 #include <cstring>
 #include <limits>
+#include <new>
+#include <string>
 
 #include "server/hierarchy/refinement_vertex.h"
 
@@ -272,10 +272,10 @@ class HierarchyBuilder {
     constexpr int kB = kT - 1;
     const int bxn = std::min(kB, cx), byn = std::min(kB, cy), bzn = std::min(kB, cz);
     bool ok = true;
-    static constexpr int kX[kB] = {
-        HierarchyBrick::Local(0, 0), HierarchyBrick::Local(0, 1), HierarchyBrick::Local(0, 2),
-        HierarchyBrick::Local(0, 3), HierarchyBrick::Local(0, 4), HierarchyBrick::Local(0, 5),
-        HierarchyBrick::Local(0, 6), HierarchyBrick::Local(0, 7)};
+    static constexpr int kX[kB] = {HierarchyBrick::Local(0, 0), HierarchyBrick::Local(0, 1),
+                                   HierarchyBrick::Local(0, 2), HierarchyBrick::Local(0, 3),
+                                   HierarchyBrick::Local(0, 4), HierarchyBrick::Local(0, 5),
+                                   HierarchyBrick::Local(0, 6), HierarchyBrick::Local(0, 7)};
     for (int z = 0; z < kB; ++z)
       for (int y = 0; y < kB; ++y) {
         const int yz = HierarchyBrick::Local(2, z) + HierarchyBrick::Local(1, y);
@@ -291,8 +291,7 @@ class HierarchyBuilder {
         if ((z | y) & 1) {  // every x is scale 0
           for (int x = 0; x < inside; ++x) eta[kX[x]] = EncodeEtaRoundingUp(e[p + x]);
         } else {  // odd x only
-          for (int x = 0; x < inside; ++x)
-            eta[kX[x]] = x & 1 ? EncodeEtaRoundingUp(e[p + x]) : 0;
+          for (int x = 0; x < inside; ++x) eta[kX[x]] = x & 1 ? EncodeEtaRoundingUp(e[p + x]) : 0;
         }
         for (int x = inside; x < kB; ++x) eta[kX[x]] = 0;
         if (z & y & 1)

@@ -269,8 +269,8 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
 
   ExtractRequest remembering = request;  // budget -> eps is the same for every view
   remembering.budget_memo = &volume.budget_memo;
-  auto result = Extract(*volume.prepared.hierarchy, volume.prepared.grid_to_world, remembering,
-                        &observer);
+  auto result =
+      Extract(*volume.prepared.hierarchy, volume.prepared.grid_to_world, remembering, &observer);
   bool last_cut = false;
   if (result.ok()) *stats_out = result->stats;
   if (result.ok() && !cancel->load() && wait_for_room()) {

@@ -87,16 +87,15 @@ absl::StatusOr<VolumePtr> LoadRawSpec(std::string_view spec, const VolumeLimits&
         " " + std::string(type_name) + " samples need " + std::to_string(expected));
   }
   std::string grid_name = path.substr(path.find_last_of('/') + 1);
-  ISOSTREAM_ASSIGN_OR_RETURN(VolumePtr volume, ReadSamples(input, layout, spec_text, grid_name,
-                                                           {1, 1, 1}, {0, 0, 0}));
+  ISOSTREAM_ASSIGN_OR_RETURN(
+      VolumePtr volume, ReadSamples(input, layout, spec_text, grid_name, {1, 1, 1}, {0, 0, 0}));
   // A compressed file's size is known only once read: the same refusal, after the fact.
   unsigned char extra;
   ISOSTREAM_ASSIGN_OR_RETURN(const size_t more, input.Read(&extra, 1));
   if (more != 0) {
-    return absl::InvalidArgumentError(path + ": file has more than the " +
-                                      std::to_string(expected) + " bytes that " +
-                                      std::string(dims_text) + " " + std::string(type_name) +
-                                      " samples need");
+    return absl::InvalidArgumentError(
+        path + ": file has more than the " + std::to_string(expected) + " bytes that " +
+        std::string(dims_text) + " " + std::string(type_name) + " samples need");
   }
   return volume;
 }

@@ -145,8 +145,8 @@ absl::Status CheckWorldBox(const std::array<int, 3>& dims, const std::array<doub
   for (int a = 0; a < 3; ++a) {
     const double s = spacing[a], lo = origin[a], hi = lo + s * (dims[a] - 1);
     if (!(s >= 1 / kMaxWorldCoordinate && s <= kMaxWorldCoordinate)) {
-      return absl::InvalidArgumentError(where + ": " + kAxis[a] + " spacing " +
-                                        std::to_string(s) + " is outside [1e-30, 1e30]");
+      return absl::InvalidArgumentError(where + ": " + kAxis[a] + " spacing " + std::to_string(s) +
+                                        " is outside [1e-30, 1e30]");
     }
     if (!(std::fabs(lo) <= kMaxWorldCoordinate && std::fabs(hi) <= kMaxWorldCoordinate)) {
       char text[96];

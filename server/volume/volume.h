@@ -31,7 +31,7 @@ using VolumePtr = std::shared_ptr<const Volume>;
 
 // Limits a loader enforces before allocating anything. Both the CLI and the daemon set them.
 struct VolumeLimits {
-  int max_dim = 1025;                          // samples per axis
+  int max_dim = 1025;                                // samples per axis
   int64_t max_voxels = int64_t{1025} * 1025 * 1025;  // samples in all
 };
 

@@ -346,8 +346,8 @@ TEST(Extract, BudgetPastAnyFrameGivesTheFullResolutionMesh) {
   const auto h = MakeHierarchy(4, BlobsField);
   ExtractRequest r = Request({0.2f, 0.5f}, 0, {50, 50, 50});
   const auto full = RunExtract(*h, r);
-  for (int64_t budget : {int64_t{1} << 40, (int64_t{1} << 61) + 1,
-                         std::numeric_limits<int64_t>::max()}) {
+  for (int64_t budget :
+       {int64_t{1} << 40, (int64_t{1} << 61) + 1, std::numeric_limits<int64_t>::max()}) {
     r.budget = budget;
     const auto res = RunExtract(*h, r);
     EXPECT_EQ(res.stats.eps_used, 0) << budget;

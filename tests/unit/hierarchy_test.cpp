@@ -3,7 +3,6 @@
 #include "server/hierarchy/hierarchy.h"
 
 #include <gtest/gtest.h>
-
 #include <sys/resource.h>
 #include <unistd.h>
 
