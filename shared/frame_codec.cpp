@@ -143,6 +143,10 @@ absl::Status DecodeRawPayload(const ChunkHeader& header, const char* payload,
   const char* triangles = normals + (header.has_normals ? 12 * vertex_count : 0);
   const char* surface = triangles + 12 * triangle_count;
   // check everything before appending anything
+  for (size_t i = 0; i < 3 * vertex_count; ++i) {
+    if (!std::isfinite(Load<float>(positions + 4 * i)))
+      return absl::DataLossError(absl::StrCat("raw chunk vertex ", i / 3, " is not finite"));
+  }
   for (size_t i = 0; i < 3 * triangle_count; ++i) {
     if (Load<uint32_t>(triangles + 4 * i) >= vertex_count) {
       return absl::DataLossError(

@@ -35,6 +35,17 @@ absl::Status FrameAssembler::Add(const pb::FrameChunk& chunk) {
   ++frame_.chunks;
   frame_.bytes += int64_t(chunk.data().size());
   if (chunk.last()) {
+    // The last chunk says how many chunks and triangles the frame has: a stream that ends it
+    // early must not pass for the whole frame.
+    if (chunk.chunk_count() != next_chunk_)
+      return absl::DataLossError("frame " + std::to_string(frame_.id) + " ended after " +
+                                 std::to_string(next_chunk_) + " chunks, its last chunk says " +
+                                 std::to_string(chunk.chunk_count()));
+    if (chunk.has_stats() && chunk.stats().triangles() != int64_t(frame_.mesh.triangle_count()))
+      return absl::DataLossError("frame " + std::to_string(frame_.id) + " has " +
+                                 std::to_string(frame_.mesh.triangle_count()) +
+                                 " triangles, its stats say " +
+                                 std::to_string(chunk.stats().triangles()));
     frame_.stats = chunk.stats();
     complete_ = true;
   }
@@ -91,6 +102,10 @@ void Session::Cancel() {
 }
 
 absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& options) {
+  // gRPC aborts the process on metadata it cannot send: refuse such a token here.
+  for (unsigned char ch : options.token)
+    if (ch < 0x20 || ch > 0x7e)
+      return absl::InvalidArgumentError("the token must be printable ASCII characters");
   auto c = std::unique_ptr<Client>(new Client());
   c->options_ = options;
   grpc::ChannelArguments args;
@@ -176,6 +191,9 @@ absl::StatusOr<Frame> Client::Fetch(const pb::ViewRequest& view,
   ISOSTREAM_RETURN_IF_ERROR(FromGrpc(reader->Finish()));
   ISOSTREAM_RETURN_IF_ERROR(problem);
   if (!have) return absl::DataLossError("the stream ended without a complete frame");
+  if (result.id != view.request_id())
+    return absl::DataLossError("the server answered request " + std::to_string(view.request_id()) +
+                               " with frame " + std::to_string(result.id));
   return result;
 }
 

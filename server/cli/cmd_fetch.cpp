@@ -94,6 +94,9 @@ int RunFetch(const FetchArgs& args) {
     std::stringstream s;
     s << in.rdbuf();
     options.tls_ca_pem = s.str();
+    // An empty PEM would mean plaintext (a directory also opens and reads as empty).
+    if (options.tls_ca_pem.empty())
+      return fail("--tls-ca '" + args.tls_ca + "' holds no certificates", 2);
   }
   auto client = net::Client::Connect(options);
   if (!client.ok()) return fail(std::string(client.status().message()), 1);
@@ -126,8 +129,10 @@ int RunFetch(const FetchArgs& args) {
     std::printf("ms            extract %.1f  encode %.1f (summed over chunks)  frame %.1f\n",
                 s.extract_ms(), s.encode_ms(), s.frame_ms());
   }
-  std::fprintf(stderr, "wrote %s: %zu triangles in back-to-front order (eps %g)\n",
-               args.output.c_str(), frame->mesh.triangle_count(), frame->stats.eps_used());
+  std::fprintf(stderr, "wrote %s: %zu triangles %s (eps %g)\n", args.output.c_str(),
+               frame->mesh.triangle_count(),
+               args.view.order == "none" ? "unordered" : "in back-to-front order",
+               frame->stats.eps_used());
   return 0;
 }
 

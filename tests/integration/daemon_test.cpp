@@ -518,6 +518,13 @@ TEST_F(GuardedDaemon, TokenIsRequired) {
   ASSERT_TRUE(health.ok());
   EXPECT_TRUE(*health);
   EXPECT_TRUE(Connect("s3cret")->Fetch(view).ok());
+  // gRPC aborts on metadata it cannot send: such a token is refused before any call.
+  for (const char* bad : {"a\nb", "t\xc3\xb6k", "\x7f"}) {
+    net::ClientOptions o;
+    o.address = daemon_->address();
+    o.token = bad;
+    EXPECT_EQ(net::Client::Connect(o).status().code(), absl::StatusCode::kInvalidArgument) << bad;
+  }
 }
 
 TEST_F(GuardedDaemon, FrameOverTriangleLimitIsResourceExhausted) {

@@ -5,6 +5,7 @@
 #include <fstream>
 #include <mutex>
 
+#include "client/net/session_client.h"
 #include "server/service/catalogue.h"
 #include "server/service/config.h"
 #include "server/service/frame_producer.h"
@@ -197,6 +198,28 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   EXPECT_EQ(next, direct->mesh.triangle_count());
   EXPECT_EQ(sink.chunks_.back().stats().triangles(), int64_t(next));
   EXPECT_EQ(counters.frames_started.load(), 1);
+
+  // The client puts them back together; a frame whose last chunk comes early, or whose last
+  // chunk's counts disagree with what arrived, is DATA_LOSS, not a smaller frame.
+  auto assemble = [](const std::vector<::isostream::v1::FrameChunk>& chunks) {
+    net::FrameAssembler a;
+    for (const auto& c : chunks) {
+      const absl::Status s = a.Add(c);
+      if (!s.ok()) return s;
+    }
+    return a.complete() ? absl::OkStatus() : absl::UnavailableError("incomplete");
+  };
+  ASSERT_TRUE(assemble(sink.chunks_).ok());
+  std::vector<::isostream::v1::FrameChunk> early = {sink.chunks_[0]};
+  early[0].set_last(true);
+  early[0].set_chunk_count(uint32_t(sink.chunks_.size()));
+  *early[0].mutable_stats() = sink.chunks_.back().stats();
+  EXPECT_EQ(assemble(early).code(), absl::StatusCode::kDataLoss);
+  early[0].set_chunk_count(1);  // consistent count, but the stats count the whole frame
+  EXPECT_EQ(assemble(early).code(), absl::StatusCode::kDataLoss);
+  auto miscounted = sink.chunks_;
+  miscounted.back().set_chunk_count(miscounted.back().chunk_count() + 1);
+  EXPECT_EQ(assemble(miscounted).code(), absl::StatusCode::kDataLoss);
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 // happens to decode, a structurally valid mesh) and leave the destination unchanged.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -66,6 +67,18 @@ class MalformedChunks : public ::testing::Test {
   std::vector<std::string> chunks_;
   OrderedMesh destination_;
 };
+
+// A raw chunk's positions follow its header; a non-finite one (with a valid checksum) is
+// DATA_LOSS, where it used to draw nothing for its triangles without a word.
+TEST_F(MalformedChunks, RawChunkWithANonFinitePositionIsRejected) {
+  for (const float bad : {std::nanf(""), INFINITY}) {
+    std::string raw = chunks_[1];
+    std::memcpy(raw.data() + kChunkHeaderSize + 4 * 7, &bad, sizeof(bad));
+    Reseal(&raw);
+    EXPECT_EQ(TryDecode(raw).code(), absl::StatusCode::kDataLoss) << bad;
+  }
+  EXPECT_TRUE(TryDecode(chunks_[1]).ok());
+}
 
 TEST_F(MalformedChunks, EmptyAndNullBuffers) {
   OrderedMesh out;
