@@ -1,6 +1,8 @@
 #include "shared/number_list.h"
 
+#include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <string>
 
@@ -20,6 +22,27 @@ absl::StatusOr<std::vector<double>> ParseNumberList(std::string_view text, std::
     start = end + 1;
   }
   return out;
+}
+
+absl::Status ParseImageSize(std::string_view text, std::string_view what, int max_side, int* width,
+                            int* height) {
+  const auto bad = [&] {
+    return absl::InvalidArgumentError(std::string(what) + ": '" + std::string(text) +
+                                      "' is not WxH with sides in 1.." + std::to_string(max_side));
+  };
+  const size_t x = text.find('x');
+  if (x == std::string_view::npos) return bad();
+  int64_t side[2];
+  const std::string_view parts[2] = {text.substr(0, x), text.substr(x + 1)};
+  for (int i = 0; i < 2; ++i) {
+    const char* end = parts[i].data() + parts[i].size();
+    const auto [at, ec] = std::from_chars(parts[i].data(), end, side[i]);
+    if (parts[i].empty() || ec != std::errc() || at != end || side[i] < 1 || side[i] > max_side)
+      return bad();
+  }
+  *width = int(side[0]);
+  *height = int(side[1]);
+  return absl::OkStatus();
 }
 
 }  // namespace isostream

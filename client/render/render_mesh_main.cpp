@@ -14,9 +14,12 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/trigonometric.hpp>
+#include <glm/vector_relational.hpp>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -57,12 +60,7 @@ absl::StatusOr<glm::vec3> ParseVec3(const std::string& text, const char* what) {
 }
 
 absl::Status ParseSize(const std::string& text, int* width, int* height) {
-  char tail = 0;
-  if (std::sscanf(text.c_str(), "%dx%d%c", width, height, &tail) != 2 || *width < 1 ||
-      *height < 1) {
-    return absl::InvalidArgumentError(absl::StrCat("--size: '", text, "' is not WxH"));
-  }
-  return absl::OkStatus();
+  return ParseImageSize(text, "--size", 16384, width, height);
 }
 
 // out.png -> out_007.png, so an orbit's frames sort in order.
@@ -102,6 +100,7 @@ absl::StatusOr<Camera> MakeCamera(const Args& args, const OrderedMesh& mesh, flo
   }
   if (!args.view_dir.empty()) {
     ISOSTREAM_ASSIGN_OR_RETURN(glm::vec3 d, ParseVec3(args.view_dir, "--view-dir"));
+    if (d == glm::vec3(0.0f)) return absl::InvalidArgumentError("--view-dir is zero");
     camera.projection = Projection::kOrthographic;
     const glm::vec3 target = camera.target;
     camera = FrameSphere(centre, radius, -d, camera);
@@ -153,6 +152,9 @@ absl::Status Run(const Args& args) {
   ISOSTREAM_ASSIGN_OR_RETURN(std::unique_ptr<MeshRenderer> renderer, MeshRenderer::Create());
   if (!args.background.empty()) {
     ISOSTREAM_ASSIGN_OR_RETURN(glm::vec3 bg, ParseVec3(args.background, "--background"));
+    if (glm::any(glm::lessThan(bg, glm::vec3(0.0f))) ||
+        glm::any(glm::greaterThan(bg, glm::vec3(1.0f))))
+      return absl::InvalidArgumentError("--background: r,g,b must be in 0..1");
     renderer->SetBackground(glm::vec4(bg, 1.0f));
   }
 
@@ -205,7 +207,14 @@ int main(int argc, char** argv) {
   app.add_option("--background", args.background, "background r,g,b in 0..1 (default white)");
   CLI11_PARSE(app, argc, argv);
 
-  const absl::Status status = isostream::render::Run(args);
+  absl::Status status;
+  try {
+    status = isostream::render::Run(args);
+  } catch (const std::bad_alloc&) {
+    status = absl::ResourceExhaustedError("out of memory");
+  } catch (const std::exception& e) {
+    status = absl::InternalError(e.what());
+  }
   if (!status.ok()) {
     std::fprintf(stderr, "isostream-render-mesh: %s\n", std::string(status.message()).c_str());
     return 1;

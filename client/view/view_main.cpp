@@ -5,14 +5,20 @@
 // volume, each one a fresh frame ordered by the server for its own eye.
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/trigonometric.hpp>
+#include <mutex>
+#include <new>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "client/net/session_client.h"
@@ -44,6 +50,7 @@ struct Args {
   bool window = false;
   int exit_after_frames = 0;
   bool progressive = true;
+  int timeout_s = 60;  // headless: give up after this long without data from the server
 };
 
 absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what) {
@@ -62,12 +69,59 @@ std::string NumberedPath(const std::string& path, int index) {
 // Receives one view's frame: chunks are uploaded as they arrive into the renderer's pending
 // frame, which replaces the shown one whole when complete. Coarse frames of a progressive view
 // are shown on the way (a window would display them); the refined frame is returned.
+// Cancels a session that has heard nothing from the server for `limit` (0: never): a Session
+// has no deadline (it lives as long as views come), so a stalled daemon would otherwise hold
+// the viewer forever.
+class Watchdog {
+ public:
+  Watchdog(net::Session& session, std::chrono::seconds limit) : session_(session), limit_(limit) {
+    if (limit_.count() > 0) thread_ = std::thread([this] { Watch(); });
+  }
+  ~Watchdog() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  void Touch() {
+    std::lock_guard<std::mutex> lock(mu_);
+    last_ = Clock::now();
+  }
+  bool fired() const { return fired_.load(); }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  void Watch() {
+    std::unique_lock<std::mutex> lock(mu_);
+    while (!cv_.wait_for(lock, std::chrono::milliseconds(100), [&] { return stop_; })) {
+      if (Clock::now() - last_ > limit_) {
+        fired_ = true;
+        session_.TryCancel();  // the blocked Read returns false
+        return;
+      }
+    }
+  }
+  net::Session& session_;
+  const std::chrono::seconds limit_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  Clock::time_point last_ = Clock::now();
+  bool stop_ = false;
+  std::atomic<bool> fired_{false};
+  std::thread thread_;
+};
+
 absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_id,
-                                        render::MeshRenderer& renderer, int* coarse_frames) {
+                                        render::MeshRenderer& renderer, int* coarse_frames,
+                                        std::chrono::seconds idle_limit) {
   net::FrameAssembler assembler;
   pb::FrameChunk chunk;
   bool frame_open = false;
+  Watchdog watchdog(session, idle_limit);
   while (session.Read(&chunk)) {
+    watchdog.Touch();
     if (chunk.frame_id() != request_id) continue;  // an older view's frame, superseded
     const size_t before = assembler.frame().mesh.triangle_count();
     const bool starts = chunk.chunk_index() == 0;
@@ -89,6 +143,9 @@ absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_
     }
     return assembler.Take();
   }
+  if (watchdog.fired())
+    return absl::DeadlineExceededError("no data from the server for " +
+                                       std::to_string(idle_limit.count()) + " s");
   const absl::Status status = session.Finish();
   if (!status.ok()) return status;
   return absl::UnavailableError("the server closed the stream before the frame was complete");
@@ -139,10 +196,8 @@ int Run(const Args& args) {
     return Fail(absl::InvalidArgumentError("give -o frame.png (or --window)"));
   }
   int width = 0, height = 0;
-  char tail = 0;
-  if (std::sscanf(args.size.c_str(), "%dx%d%c", &width, &height, &tail) != 2 || width < 1 ||
-      height < 1 || width > 16384 || height > 16384)
-    return Fail(absl::InvalidArgumentError("--size: '" + args.size + "' is not WxH"));
+  const absl::Status size_ok = ParseImageSize(args.size, "--size", 16384, &width, &height);
+  if (!size_ok.ok()) return Fail(size_ok);
 
   net::ClientOptions options;
   options.address = args.server;
@@ -151,6 +206,9 @@ int Run(const Args& args) {
   if (!client.ok()) return Fail(client.status());
   auto info = (*client)->GetVolumeInfo(args.volume);
   if (!info.ok()) return Fail(info.status());
+  if (info->dims_size() != 3)
+    return Fail(absl::DataLossError("the server described the volume with " +
+                                    std::to_string(info->dims_size()) + " dims, not 3"));
 
   // The volume's box frames the default camera and gives default isovalues.
   glm::vec3 lo, hi;
@@ -246,7 +304,8 @@ int Run(const Args& args) {
     const absl::Status sent = (*session)->Send(view);
     if (!sent.ok()) return Fail(sent);
     int coarse = 0;
-    auto frame = ReceiveFrame(**session, i + 1, **renderer, &coarse);
+    auto frame =
+        ReceiveFrame(**session, i + 1, **renderer, &coarse, std::chrono::seconds(args.timeout_s));
     if (!frame.ok()) return Fail(frame.status());
     const double ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -296,6 +355,26 @@ int main(int argc, char** argv) {
                "[ ] isovalues, R reset, Q quit");
   app.add_option("--exit-after", args.exit_after_frames,
                  "with --window: close after N refined frames, writing -o as a screenshot");
+  app.add_option("--timeout-s", args.timeout_s,
+                 "headless: fail after this many seconds without data from the server (default "
+                 "60; 0: wait forever)")
+      ->check(CLI::Range(0, 86400));
   CLI11_PARSE(app, argc, argv);
-  return isostream::view::Run(args);
+  // Given values are checked here (NaN and -1 also mean "not given" inside Run).
+  if (*eps && !(args.eps >= 0 && std::isfinite(args.eps))) {
+    std::fprintf(stderr, "isostream-view: --eps must be a finite number >= 0\n");
+    return 2;
+  }
+  if (*budget && args.budget <= 0) {
+    std::fprintf(stderr, "isostream-view: --budget must be a positive triangle count\n");
+    return 2;
+  }
+  try {
+    return isostream::view::Run(args);
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "isostream-view: out of memory\n");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "isostream-view: %s\n", e.what());
+  }
+  return 1;
 }

@@ -7,6 +7,8 @@
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "client/net/session_client.h"
 #include "client/render/image.h"
@@ -81,6 +83,17 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   const ViewRun window = View("--server 127.0.0.1:1 --volume buckyball:65 --window", true);
   EXPECT_NE(window.code, 0);
   EXPECT_NE(window.output.find("display"), std::string::npos) << window.output;
+
+  // Given values that used to pass for "not given" or wrap around; a token gRPC cannot send.
+  for (const auto& [args, says] : std::vector<std::pair<std::string, std::string>>{
+           {"--eps nan", "--eps"},
+           {"--budget -5", "--budget"},
+           {"--size 4294967297x1", "--size"},
+           {"--token \"$(printf 'a\\tb')\"", "token"}}) {
+    const ViewRun r = View("--server 127.0.0.1:1 --volume buckyball:65 -o " + png + " " + args);
+    EXPECT_NE(r.code, 0) << args;
+    EXPECT_NE(r.output.find(says), std::string::npos) << args << "\n" << r.output;
+  }
 }
 
 // --window under a virtual X server (xvfb-run, installed by scripts/install-deps.sh): the
