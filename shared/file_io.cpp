@@ -1,6 +1,7 @@
 #include "shared/file_io.h"
 
 #include <absl/strings/str_cat.h>
+#include <sys/stat.h>
 
 #include <cerrno>
 #include <cstdio>
@@ -19,6 +20,10 @@ using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 absl::StatusOr<std::string> ReadFileBytes(const std::string& path) {
   FilePtr file(std::fopen(path.c_str(), "rb"));
   if (!file) return absl::ErrnoToStatus(errno, absl::StrCat("cannot open ", path));
+  // A device or a pipe (/dev/zero) could be read until memory runs out.
+  struct stat st;
+  if (::fstat(::fileno(file.get()), &st) != 0 || !S_ISREG(st.st_mode))
+    return absl::InvalidArgumentError(absl::StrCat(path, " is not a regular file"));
   std::string bytes;
   char block[1 << 16];
   size_t got;

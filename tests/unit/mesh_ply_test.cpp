@@ -140,6 +140,10 @@ TEST(MeshPly, MissingFileIsNotFound) {
   const absl::StatusOr<OrderedMesh> read = ReadPly(dir.File("absent.ply"));
   EXPECT_EQ(read.status().code(), absl::StatusCode::kNotFound) << read.status();
   EXPECT_NE(read.status().message().find("absent.ply"), absl::string_view::npos);
+  // A device is refused up front: /dev/zero would be read until memory ran out.
+  const absl::StatusOr<OrderedMesh> device = ReadPly("/dev/zero");
+  EXPECT_EQ(device.status().code(), absl::StatusCode::kInvalidArgument) << device.status();
+  EXPECT_EQ(ReadPly(dir.File("")).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST(MeshPly, WriteRejectsInvalidMeshesAndBadPaths) {
