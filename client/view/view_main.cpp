@@ -66,9 +66,6 @@ std::string NumberedPath(const std::string& path, int index) {
   return path.substr(0, dot) + suffix + path.substr(dot);
 }
 
-// Receives one view's frame: chunks are uploaded as they arrive into the renderer's pending
-// frame, which replaces the shown one whole when complete. Coarse frames of a progressive view
-// are shown on the way (a window would display them); the refined frame is returned.
 // Cancels a session that has heard nothing from the server for `limit` (0: never): a Session
 // has no deadline (it lives as long as views come), so a stalled daemon would otherwise hold
 // the viewer forever.
@@ -113,6 +110,10 @@ class Watchdog {
   std::thread thread_;
 };
 
+// Receives one view's frame: chunks are uploaded as they arrive into the renderer's pending
+// frame, which replaces the shown one whole when complete. Coarse frames of a progressive view
+// are shown on the way (a window would display them); the refined frame is returned.
+// Gives up after `idle_limit` without a chunk (0: never).
 absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_id,
                                         render::MeshRenderer& renderer, int* coarse_frames,
                                         std::chrono::seconds idle_limit) {
