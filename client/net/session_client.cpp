@@ -106,6 +106,15 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& opt
   for (unsigned char ch : options.token)
     if (ch < 0x20 || ch > 0x7e)
       return absl::InvalidArgumentError("the token must be printable ASCII characters");
+  // A port past 65535 would be taken modulo 65536 (:104903 reached :39367).
+  const size_t colon = options.address.rfind(':');
+  if (colon != std::string::npos && colon + 1 < options.address.size()) {
+    const std::string port = options.address.substr(colon + 1);
+    if (port.find_first_not_of("0123456789") == std::string::npos &&
+        (port.size() > 5 || std::stoi(port) > 65535))
+      return absl::InvalidArgumentError("port " + port + " of " + options.address +
+                                        " is past 65535");
+  }
   auto c = std::unique_ptr<Client>(new Client());
   c->options_ = options;
   grpc::ChannelArguments args;

@@ -525,6 +525,9 @@ TEST_F(GuardedDaemon, TokenIsRequired) {
     o.token = bad;
     EXPECT_EQ(net::Client::Connect(o).status().code(), absl::StatusCode::kInvalidArgument) << bad;
   }
+  net::ClientOptions far;
+  far.address = "127.0.0.1:104903";  // would wrap to port 39367
+  EXPECT_EQ(net::Client::Connect(far).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST_F(GuardedDaemon, FrameOverTriangleLimitIsResourceExhausted) {
