@@ -3,6 +3,7 @@
 #include <absl/strings/str_cat.h>
 #include <absl/strings/string_view.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -63,6 +64,24 @@ std::string PlyHeader(const OrderedMesh& mesh, bool binary) {
 // Reading
 
 enum class PlyType { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, kFloat64 };
+
+size_t TypeBytes(PlyType type) {
+  switch (type) {
+    case PlyType::kInt8:
+    case PlyType::kUint8:
+      return 1;
+    case PlyType::kInt16:
+    case PlyType::kUint16:
+      return 2;
+    case PlyType::kInt32:
+    case PlyType::kUint32:
+    case PlyType::kFloat32:
+      return 4;
+    case PlyType::kFloat64:
+      return 8;
+  }
+  return 1;
+}
 
 std::optional<PlyType> ParseTypeName(absl::string_view name) {
   if (name == "char" || name == "int8") return PlyType::kInt8;
@@ -193,6 +212,21 @@ class BodyReader {
     return binary_ ? ReadBinary(type, value) : ReadText(value);
   }
 
+  // DataLoss unless what is left can hold `element`'s items: each takes at least the bytes of
+  // its properties (a list its count; ascii a character and a separator each). Checked before
+  // an element is allocated, so a header cannot ask for many times the file's size.
+  absl::Status CheckFits(const PlyElement& element) const {
+    size_t item_bytes = 0;
+    for (const PlyProperty& p : element.properties)
+      item_bytes += binary_ ? TypeBytes(p.is_list ? p.count_type : p.type) : 2;
+    item_bytes = std::max<size_t>(item_bytes, 1);
+    const size_t left = size_t(end_ - p_);
+    if (element.count <= left / item_bytes) return absl::OkStatus();
+    return absl::DataLossError(absl::StrCat("element \"", element.name, "\" declares ",
+                                            element.count, " items of at least ", item_bytes,
+                                            " bytes but only ", left, " bytes are left"));
+  }
+
  private:
   template <typename T>
   bool ReadAs(double* value) {
@@ -282,6 +316,7 @@ absl::Status ReadVertexElement(const PlyElement& element, BodyReader* reader, Or
     return absl::InvalidArgumentError("vertex element has some but not all of nx, ny, nz");
   }
 
+  ISOSTREAM_RETURN_IF_ERROR(reader->CheckFits(element));
   const size_t count = element.count;
   mesh->positions.assign(3 * count, 0.0f);
   mesh->normals.assign(3 * count, 0.0f);
@@ -336,6 +371,7 @@ absl::Status ReadFaceElement(const PlyElement& element, size_t vertex_count, Bod
     return absl::InvalidArgumentError("face element has no vertex_indices list property");
   }
 
+  ISOSTREAM_RETURN_IF_ERROR(reader->CheckFits(element));
   const size_t count = element.count;
   mesh->triangles.assign(3 * count, 0);
   mesh->surface.assign(count, 0);

@@ -3,6 +3,8 @@
 #include <draco/io/mesh_io.h>
 #include <gtest/gtest.h>
 
+#include <fstream>
+
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -144,6 +146,25 @@ TEST(MeshPly, MissingFileIsNotFound) {
   const absl::StatusOr<OrderedMesh> device = ReadPly("/dev/zero");
   EXPECT_EQ(device.status().code(), absl::StatusCode::kInvalidArgument) << device.status();
   EXPECT_EQ(ReadPly(dir.File("")).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+// A count the body cannot hold at its properties' size is refused before anything is
+// allocated for it: 1 M float vertices (12 bytes each) with 1.5 MB of body would have asked
+// for 24 MB of positions and normals.
+TEST(MeshPly, CountsTheBodyCannotHoldAreDataLoss) {
+  ScratchDir dir;
+  const std::string path = dir.File("short_body.ply");
+  {
+    std::ofstream out(path, std::ios::binary);
+    out << "ply\nformat binary_little_endian 1.0\nelement vertex 1000000\n"
+           "property float x\nproperty float y\nproperty float z\nelement face 0\n"
+           "property list uchar uint vertex_indices\nend_header\n";
+    out << std::string(1500000, '\0');
+  }
+  const absl::StatusOr<OrderedMesh> read = ReadPly(path);
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kDataLoss) << read.status();
+  EXPECT_NE(read.status().message().find("at least 12 bytes"), absl::string_view::npos)
+      << read.status();
 }
 
 TEST(MeshPly, WriteRejectsInvalidMeshesAndBadPaths) {
