@@ -3,11 +3,10 @@
 #include <draco/io/mesh_io.h>
 #include <gtest/gtest.h>
 
-#include <fstream>
-
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <random>
 #include <string>
