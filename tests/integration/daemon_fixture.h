@@ -1,0 +1,93 @@
+// The daemon the integration tests drive: a real isostreamd on 127.0.0.1 started once per test
+// suite (a suite with other flags derives and starts its own), a client for it, and the view
+// requests the tests send. Shared by daemon_test.cpp (the default daemon) and
+// daemon_options_test.cpp (daemons started with a token, a catalogue, limits, TLS).
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <functional>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "client/net/session_client.h"
+#include "server/hierarchy/prepared_volume.h"
+#include "tests/integration/daemon_process.h"
+
+namespace isostream::testing {
+
+namespace pb = ::isostream::v1;
+
+// The buckyball shells every test view asks for.
+inline const std::vector<float> kIso = {0.05f, 0.15f, 0.25f};
+
+inline pb::ViewRequest MakeView(const std::string& volume, uint64_t id, double eps, glm::dvec3 eye,
+                                pb::Codec codec = pb::DRACO) {
+  pb::ViewRequest v;
+  v.set_volume(volume);
+  v.set_request_id(id);
+  for (float iso : kIso) v.add_surfaces()->set_isovalue(iso);
+  v.set_eps(eps);
+  v.mutable_camera()->mutable_eye()->set_x(eye.x);
+  v.mutable_camera()->mutable_eye()->set_y(eye.y);
+  v.mutable_camera()->mutable_eye()->set_z(eye.z);
+  v.set_codec(codec);
+  return v;
+}
+
+// The default daemon (small limits so the limit tests stay quick), shared by a suite.
+class Daemon : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start(
+        {"--cache-dir", scratch_->path() + "/cache", "--threads", "2", "--max-sessions", "3",
+         "--max-isovalues", "4", "--max-triangles", "1000000", "--max-dim", "129"},
+        scratch_->path() + "/isostreamd.log"));
+  }
+  static void TearDownTestSuite() {
+    delete daemon_;
+    delete scratch_;
+  }
+
+  std::unique_ptr<net::Client> Connect(const std::string& token = "") {
+    net::ClientOptions o;
+    o.address = daemon_->address();
+    o.token = token;
+    auto c = net::Client::Connect(o);
+    EXPECT_TRUE(c.ok());
+    return std::move(*c);
+  }
+
+  // The server's own preparation of the volume, repeated here (same cache) for comparison.
+  static PreparedVolume Local(const std::string& spec) {
+    HierarchyCacheOptions cache;
+    cache.dir = scratch_->path() + "/cache";
+    auto p = PrepareVolume(spec, VolumeLimits{}, cache, HierarchyBuildOptions{});
+    EXPECT_TRUE(p.ok()) << p.status();
+    return std::move(*p);
+  }
+
+  // Polls the server's counters until `done` holds (at most 10 s).
+  static bool WaitForStats(net::Client* c, const std::function<bool(const pb::ServerStats&)>& done,
+                           pb::ServerStats* last = nullptr) {
+    for (int i = 0; i < 500; ++i) {
+      auto s = c->GetServerStats();
+      if (s.ok() && done(*s)) {
+        if (last) *last = *s;
+        return true;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return false;
+  }
+
+  inline static ScratchDir* scratch_ = nullptr;
+  inline static DaemonProcess* daemon_ = nullptr;
+};
+
+}  // namespace isostream::testing

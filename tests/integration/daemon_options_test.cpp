@@ -1,0 +1,333 @@
+// Integration tests of isostreamd started with options: a token and tight limits, a catalogue
+// from a config file, a short frame deadline, an idle timeout, TLS. Each suite starts its own
+// daemon on 127.0.0.1 (daemon_fixture.h); every wait is bounded.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "tests/integration/daemon_fixture.h"
+
+namespace isostream {
+namespace {
+
+namespace pb = ::isostream::v1;
+using testing::Daemon;
+using testing::DaemonProcess;
+using testing::kIso;
+using testing::MakeView;
+using testing::ScratchDir;
+
+// A daemon with a token and tight limits; it is stopped with SIGTERM at the end.
+class GuardedDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start({"--cache-dir", scratch_->path() + "/cache", "--threads", "2",
+                                "--token", "s3cret", "--max-triangles", "100000"},
+                               scratch_->path() + "/isostreamd.log"));
+  }
+};
+
+TEST_F(GuardedDaemon, TokenIsRequired) {
+  const auto view = MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2));
+  EXPECT_EQ(Connect()->Fetch(view).status().code(), absl::StatusCode::kUnauthenticated);
+  EXPECT_EQ(Connect("wrong")->Fetch(view).status().code(), absl::StatusCode::kUnauthenticated);
+  EXPECT_EQ(Connect("wrong")->GetServerStats().status().code(), absl::StatusCode::kUnauthenticated);
+  auto session = Connect("s3cre")->OpenSession();
+  ASSERT_TRUE(session.ok());
+  EXPECT_EQ((*session)->Finish().code(), absl::StatusCode::kUnauthenticated);
+  // Health needs no token.
+  auto health = Connect()->CheckHealth();
+  ASSERT_TRUE(health.ok());
+  EXPECT_TRUE(*health);
+  EXPECT_TRUE(Connect("s3cret")->Fetch(view).ok());
+  // gRPC aborts on metadata it cannot send: such a token is refused before any call.
+  for (const char* bad : {"a\nb", "t\xc3\xb6k", "\x7f"}) {
+    net::ClientOptions o;
+    o.address = daemon_->address();
+    o.token = bad;
+    EXPECT_EQ(net::Client::Connect(o).status().code(), absl::StatusCode::kInvalidArgument) << bad;
+  }
+  net::ClientOptions far;
+  far.address = "127.0.0.1:104903";  // would wrap to port 39367
+  EXPECT_EQ(net::Client::Connect(far).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST_F(GuardedDaemon, FrameOverTriangleLimitIsResourceExhausted) {
+  // About 138k triangles at this eps, over --max-triangles 100000.
+  auto s = Connect("s3cret")->Fetch(MakeView("buckyball:65", 1, 0.002, glm::dvec3(2, 2, 2)));
+  EXPECT_EQ(s.status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_NE(s.status().message().find("100000"), std::string::npos) << s.status();
+}
+
+TEST_F(GuardedDaemon, SigtermFinishesTheFrameInFlightAndExitsZero) {
+  auto c = Connect("s3cret");
+  std::atomic<bool> first_chunk{false};
+  absl::Status fetched;
+  std::thread fetch([&] {
+    pb::ViewRequest view = MakeView("buckyball:129", 5, 0.0, glm::dvec3(2, 2, 2));
+    view.set_triangle_budget(95000);
+    auto f = c->Fetch(view, [&](const pb::FrameChunk&) { first_chunk = true; });
+    fetched = f.status();
+  });
+  for (int i = 0; i < 1000 && !first_chunk; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_EQ(daemon_->Stop(SIGTERM), 0);
+  fetch.join();
+  EXPECT_TRUE(fetched.ok()) << fetched;
+}
+
+// A daemon with a JSON config: a catalogue (so generator specs are refused) and small chunks.
+class ConfiguredDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    const std::string config = scratch_->path() + "/isostreamd.json";
+    std::ofstream(config)
+        << R"({"threads": 2, "volumes": {"ball": "buckyball:65", "big": "buckyball:129"},
+        "frames": {"chunk_triangles": 4096, "first_chunk_triangles": 1024,
+                   "max_queued_chunks": 4}})";
+    ASSERT_TRUE(daemon_->Start({"--config", config, "--cache-dir", scratch_->path() + "/cache"},
+                               scratch_->path() + "/isostreamd.log"));
+  }
+};
+
+TEST_F(ConfiguredDaemon, ServesItsCatalogueOnly) {
+  auto c = Connect();
+  auto list = c->ListVolumes();
+  ASSERT_TRUE(list.ok());
+  ASSERT_EQ(list->names_size(), 2);
+  EXPECT_EQ(list->names(0), "ball");
+  EXPECT_EQ(list->names(1), "big");
+  EXPECT_FALSE(list->generators_allowed());
+  EXPECT_EQ(c->Fetch(MakeView("buckyball:65", 1, 0.01, glm::dvec3(2, 2, 2))).status().code(),
+            absl::StatusCode::kNotFound);
+  std::vector<uint32_t> sizes;
+  auto frame = c->Fetch(MakeView("ball", 3, 0.01, glm::dvec3(2, 2, 2)),
+                        [&](const pb::FrameChunk& ch) { sizes.push_back(ch.triangle_count()); });
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  ASSERT_GT(sizes.size(), 3u);
+  EXPECT_EQ(sizes[0], 1024u);
+  EXPECT_EQ(sizes[1], 2048u);
+  for (size_t i = 2; i + 1 < sizes.size(); ++i) EXPECT_EQ(sizes[i], 4096u);
+}
+
+TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
+  // A frame too big for the transport's buffers (raw, flat normals: ~85 bytes per triangle,
+  // ~690k triangles), read by a client that stops after the first chunk until the checks
+  // below are done: the frame is still in flight on the server while they run.
+  auto c = Connect();
+  std::atomic<bool> started{false}, resume{false};
+  absl::StatusOr<net::Frame> slow = absl::UnknownError("not run");
+  std::thread reader([&] {
+    pb::ViewRequest v = MakeView("big", 5, 0.0, glm::dvec3(3, 2, 4), pb::RAW);
+    v.set_normals(pb::FLAT);
+    slow = c->Fetch(v, [&](const pb::FrameChunk&) {
+      started = true;
+      for (int i = 0; i < 1000 && !resume; ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    });
+  });
+  for (int i = 0; i < 2000 && !started; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_TRUE(started);
+  // An idle session, open when the signal comes: it ends with UNAVAILABLE.
+  auto idle = c->OpenSession();
+  ASSERT_TRUE(idle.ok());
+  ASSERT_TRUE((*idle)->Send(MakeView("ball", 9, 0.05, glm::dvec3(2, 2, 2))).ok());
+  pb::FrameChunk chunk;
+  while ((*idle)->Read(&chunk) && !chunk.last()) {
+  }
+  ASSERT_EQ(kill(daemon_->pid(), SIGTERM), 0);
+  // While the frame drains: health NOT_SERVING and new streams refused.
+  bool not_serving = false;
+  for (int i = 0; i < 200 && !not_serving; ++i) {
+    auto h = Connect()->CheckHealth();
+    not_serving = h.ok() && !*h;
+    if (!not_serving) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  EXPECT_TRUE(not_serving);
+  EXPECT_EQ(Connect()->Fetch(MakeView("ball", 6, 0.05, glm::dvec3(2, 2, 2))).status().code(),
+            absl::StatusCode::kUnavailable);
+  EXPECT_EQ((*idle)->Finish().code(), absl::StatusCode::kUnavailable);
+  resume = true;
+  reader.join();
+  ASSERT_TRUE(slow.ok()) << slow.status();
+  EXPECT_EQ(slow->stats.triangles(), int64_t(slow->mesh.triangle_count()));
+  EXPECT_EQ(daemon_->Stop(SIGTERM), 0);
+}
+
+// --deadline-ms 1: every frame that takes longer than a millisecond from request to last
+// chunk (all of them) ends with DEADLINE_EXCEEDED, and the daemon carries on.
+class ImpatientDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start({"--deadline-ms", "1", "--cache-dir", scratch_->path() + "/cache"},
+                               scratch_->path() + "/isostreamd.log"));
+  }
+};
+
+TEST_F(ImpatientDaemon, SlowFrameIsDeadlineExceeded) {
+  auto c = Connect();
+  for (int i = 0; i < 2; ++i)
+    EXPECT_EQ(c->Fetch(MakeView("buckyball:65", 1, 0.002, glm::dvec3(2, 2, 2))).status().code(),
+              absl::StatusCode::kDeadlineExceeded);
+  auto health = c->CheckHealth();
+  EXPECT_TRUE(health.ok() && *health);
+}
+
+// --idle-timeout-s 1: a session with no request and nothing in flight for a second is ended
+// by the server; sessions that keep asking are not, and the daemon keeps serving.
+class IdleDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start(
+        {"--idle-timeout-s", "1", "--threads", "2", "--cache-dir", scratch_->path() + "/cache"},
+        scratch_->path() + "/isostreamd.log"));
+  }
+
+  // Sends a small view and reads its frame to the end.
+  static bool SmallFrame(net::Session* s, uint64_t id) {
+    if (!s->Send(MakeView("buckyball:65", id, 0.05, glm::dvec3(2, 2, 2))).ok()) return false;
+    net::FrameAssembler a;
+    pb::FrameChunk chunk;
+    while (!a.complete() && s->Read(&chunk)) {
+      if (!a.Add(chunk).ok()) return false;
+    }
+    return a.complete();
+  }
+};
+
+TEST_F(IdleDaemon, IdleSessionsAreClosedBusyOnesAreNot) {
+  using Clock = std::chrono::steady_clock;
+  auto c = Connect();
+  const auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  auto idle = c->OpenSession();
+  auto busy = c->OpenSession();
+  auto silent = c->OpenSession();  // never sends a view
+  ASSERT_TRUE(idle.ok() && busy.ok() && silent.ok());
+  ASSERT_TRUE(SmallFrame(idle->get(), 1));
+  const auto idle_since = Clock::now();
+  ASSERT_TRUE(SmallFrame(busy->get(), 1));
+  // Not closed early (checked only if this machine got here well within the timeout).
+  const auto early = c->GetServerStats();
+  ASSERT_TRUE(early.ok());
+  if (Clock::now() - idle_since < std::chrono::milliseconds(800)) {
+    EXPECT_EQ(early->sessions_idle_closed(), before->sessions_idle_closed());
+  }
+  // `busy` asks every 0.3 s for 2.4 s; `idle` and `silent` say nothing.
+  for (uint64_t id = 2; id < 10; ++id) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    ASSERT_TRUE(SmallFrame(busy->get(), id)) << "view " << id;
+  }
+  const auto after_busy = Clock::now();
+  pb::ServerStats stats;
+  ASSERT_TRUE(WaitForStats(
+      c.get(),
+      [&](const pb::ServerStats& st) {
+        return st.sessions_idle_closed() == before->sessions_idle_closed() + 2 &&
+               st.sessions_open() == before->sessions_open() + 1;  // busy
+      },
+      &stats));
+  // Both ended a second after going idle (checked every 0.1 s), so already, 2.4 s in.
+  EXPECT_LT(Clock::now() - after_busy, std::chrono::milliseconds(500));
+  for (auto* session : {idle->get(), silent->get()}) {
+    pb::FrameChunk chunk;
+    EXPECT_FALSE(session->Read(&chunk));
+    const absl::Status status = session->Finish();
+    EXPECT_EQ(status.code(), absl::StatusCode::kDeadlineExceeded) << status;
+    EXPECT_NE(status.message().find("session idle for 1 s"), absl::string_view::npos) << status;
+  }
+  // The busy session still works, then ends normally; a new session is served.
+  ASSERT_TRUE(SmallFrame(busy->get(), 10));
+  ASSERT_TRUE((*busy)->CloseSend().ok());
+  EXPECT_TRUE((*busy)->Finish().ok());
+  auto fresh = c->OpenSession();
+  ASSERT_TRUE(fresh.ok());
+  ASSERT_TRUE(SmallFrame(fresh->get(), 1));
+  ASSERT_TRUE((*fresh)->CloseSend().ok());
+  EXPECT_TRUE((*fresh)->Finish().ok());
+  ASSERT_TRUE(WaitForStats(
+      c.get(), [](const pb::ServerStats& st) { return st.sessions_open() == 0; }, &stats));
+  EXPECT_EQ(stats.sessions_idle_closed(), before->sessions_idle_closed() + 2);
+  EXPECT_EQ(stats.sessions_closed(), before->sessions_closed() + 4);
+}
+
+TEST_F(IdleDaemon, AFrameInFlightIsNotIdle) {
+  // A frame too big for the transport's buffers (raw, flat normals: ~60 MB in ~16 chunks), read
+  // at 0.2 s per chunk: the server waits on the client for well over the 1 s timeout, and the
+  // session must not count as idle meanwhile. The idle clock starts after the last chunk.
+  auto c = Connect();
+  const auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  pb::ViewRequest view = MakeView("buckyball:129", 1, 0.0, glm::dvec3(3, 2, 4), pb::RAW);
+  view.set_normals(pb::FLAT);
+  ASSERT_TRUE((*session)->Send(view).ok());
+  const auto start = std::chrono::steady_clock::now();
+  net::FrameAssembler a;
+  pb::FrameChunk chunk;
+  bool checked = false;
+  while (!a.complete() && (*session)->Read(&chunk)) {
+    ASSERT_TRUE(a.Add(chunk).ok());
+    if (!checked && std::chrono::steady_clock::now() - start > std::chrono::milliseconds(2200)) {
+      // Twice the timeout into the frame, with chunks still to come: not closed.
+      auto stats = c->GetServerStats();
+      ASSERT_TRUE(stats.ok());
+      EXPECT_EQ(stats->sessions_idle_closed(), before->sessions_idle_closed());
+      EXPECT_FALSE(chunk.last());
+      checked = true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  ASSERT_TRUE(a.complete());
+  EXPECT_TRUE(checked) << "the frame streamed in under 2.2 s; it no longer tests anything";
+  // Then it is idle: ended within bounded time.
+  const absl::Status status = (*session)->Finish();
+  EXPECT_EQ(status.code(), absl::StatusCode::kDeadlineExceeded) << status;
+}
+
+class TlsDaemon : public Daemon {};
+
+TEST_F(TlsDaemon, ServesOverTls) {
+  ScratchDir dir;
+  const std::string key = dir.path() + "/key.pem", cert = dir.path() + "/cert.pem";
+  const std::string make =
+      "openssl req -x509 -newkey rsa:2048 -nodes -keyout " + key + " -out " + cert +
+      " -days 1 -subj /CN=localhost -addext subjectAltName=IP:127.0.0.1,DNS:localhost "
+      ">/dev/null 2>&1";
+  if (std::system(make.c_str()) != 0) GTEST_SKIP() << "openssl cannot make a test certificate";
+  DaemonProcess tls;
+  ASSERT_TRUE(tls.Start({"--tls-cert", cert, "--tls-key", key, "--no-cache"},
+                        dir.path() + "/isostreamd.log"));
+  std::ifstream in(cert);
+  std::stringstream pem;
+  pem << in.rdbuf();
+  net::ClientOptions o;
+  o.address = tls.address();
+  o.tls_ca_pem = pem.str();
+  auto secure = net::Client::Connect(o);
+  ASSERT_TRUE(secure.ok());
+  auto frame = (*secure)->Fetch(MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2)));
+  EXPECT_TRUE(frame.ok()) << frame.status();
+  o.tls_ca_pem.clear();
+  o.call_timeout = std::chrono::milliseconds(2000);
+  auto plain = net::Client::Connect(o);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FALSE((*plain)->ListVolumes().ok());
+  EXPECT_EQ(tls.Stop(SIGTERM), 0);
+}
+
+}  // namespace
+}  // namespace isostream
