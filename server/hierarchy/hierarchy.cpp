@@ -448,17 +448,15 @@ absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
                          (a == 0 ? offsetof(HierarchyBrick, eta) : 0);
     }
   }
-  try {
-    bricks_.resize(nb * nb * nb);  // not initialised: the builder or the assembly writes all
-  } catch (const std::bad_alloc&) {
-    return OutOfMemory(samples.n);
-  }
+  // not initialised: the builder or the assembly writes all. Failing, it throws bad_alloc,
+  // which BuildHierarchy and AssembleHierarchy turn into a status.
+  bricks_.resize(nb * nb * nb);
   AdviseHugePages(bricks_.data(), bricks_.size() * sizeof(HierarchyBrick));
   return absl::OkStatus();
 }
 
-// The store is the one large allocation, and SetUpStore reports its failure; a process at its
-// memory limit can fail the small ones too, and the caller still gets a status, not a throw.
+// An allocation that fails (the store, the large one; or any small one of a process at its
+// memory limit) is a ResourceExhausted status for the caller, not a throw.
 absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
                                                const UninitializedVector<uint16_t>& eta_codes) try {
   auto h = std::make_shared<Hierarchy>();
