@@ -93,18 +93,16 @@ struct ServiceCore {
   }
   // Forgets a stream gRPC is done with; `release_slot`: it no longer runs a frame job either.
   void Unregister(StreamBase* s, bool release_slot) {
-    std::lock_guard<std::mutex> lock(streams_mu);
-    streams.erase(s);
-    if (release_slot) ReleaseSlotLocked();
+    {
+      std::lock_guard<std::mutex> lock(streams_mu);
+      streams.erase(s);
+    }
     streams_cv.notify_all();
+    if (release_slot) ReleaseSlot();
   }
-  // The slot of a stream whose frame job outlived it (the job ends, then the slot frees).
+  // Gives back what Admit took: at the end of a stream, of its frame job if that outlived it,
+  // or of a volume-info call.
   void ReleaseSlot() {
-    std::lock_guard<std::mutex> lock(streams_mu);
-    ReleaseSlotLocked();
-    streams_cv.notify_all();
-  }
-  void ReleaseSlotLocked() {
     counters.sessions_open.fetch_sub(1);
     counters.sessions_closed.fetch_add(1);
   }
