@@ -354,7 +354,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   // node-based map spent a malloc and a free per boundary vertex inside the serial join.
   EdgeVertexTable boundary_ids(size_t{1} << 16);
   std::vector<uint32_t> to_global;
-  std::atomic<bool> cancelled{false};
+  std::atomic<bool> halted{false};  // cancelled, or past the deadline (StopReason)
   OrderedMesh& m = result.mesh;
   if (r.budget > 0) {
     // Reserving the frame's size up front saves growing the arrays by doubling, which would
@@ -445,7 +445,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
           static thread_local EdgeVertexTable table(1 << 14);
           for (size_t i = next_item++; i < items.size(); i = next_item++) {
             if (observer && !StopReason(observer).ok()) {
-              cancelled = true;
+              halted = true;
               return;
             }
             std::unique_ptr<SubtreeMesh> part = pool.Acquire();
@@ -454,7 +454,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
             std::lock_guard<std::mutex> lock(mu);
             parts[i] = std::move(part);
             done[i] = 1;
-            while (next < items.size() && done[next] && !cancelled) {
+            while (next < items.size() && done[next] && !halted) {
               append(*parts[next]);
               pool.Release(std::move(parts[next++]));
             }
@@ -462,7 +462,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
         },
         tbb::simple_partitioner());
   });
-  if (cancelled) return StopReason(observer);
+  if (halted) return StopReason(observer);
   st.extract_ms = Ms(t0) - join_ms;
   st.join_ms = join_ms;
 
