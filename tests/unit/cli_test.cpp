@@ -70,12 +70,19 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
       {"extract --volume sphere:17 --iso 0.5 --eps 0 --view-dir '' -o " + out, "--view-dir"},
       {"extract --volume sphere:17 --iso 1e300 --eps 0 -o " + out, "single-precision range"},
       {"info --volume raw:/dev/null:4x4x4:float32:xx", "byte order 'xx'"},
+
   };
   for (const auto& c : cases) {
     const CliRun r = Cli(c.args + " --no-cache");
     EXPECT_NE(r.code, 0) << c.args;
     EXPECT_NE(r.output.find(c.message), std::string::npos) << c.args << "\n" << r.output;
   }
+  // An empty CA file would have meant plaintext: refused before connecting.
+  const CliRun no_ca = Cli("fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 "
+                           "--tls-ca /dev/null -o " +
+                           out);
+  EXPECT_NE(no_ca.code, 0);
+  EXPECT_NE(no_ca.output.find("holds no certificates"), std::string::npos) << no_ca.output;
 }
 
 // Two samples per axis is a valid volume: it pads to the smallest hierarchy, 3^3.
