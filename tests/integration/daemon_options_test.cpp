@@ -10,15 +10,10 @@
 
 #include "tests/integration/daemon_fixture.h"
 
-namespace isostream {
+// In the fixture's namespace: Daemon, MakeView, kIso, pb and the process helpers need no
+// using-declarations.
+namespace isostream::testing {
 namespace {
-
-namespace pb = ::isostream::v1;
-using testing::Daemon;
-using testing::DaemonProcess;
-using testing::kIso;
-using testing::MakeView;
-using testing::ScratchDir;
 
 // A daemon with a token and tight limits; it is stopped with SIGTERM at the end.
 class GuardedDaemon : public Daemon {
@@ -330,4 +325,4 @@ TEST_F(TlsDaemon, ServesOverTls) {
 }
 
 }  // namespace
-}  // namespace isostream
+}  // namespace isostream::testing

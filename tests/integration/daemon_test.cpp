@@ -15,15 +15,10 @@
 #include "shared/ply_io.h"
 #include "tests/integration/daemon_fixture.h"
 
-namespace isostream {
+// In the fixture's namespace: Daemon, MakeView, kIso, pb and the process helpers need no
+// using-declarations.
+namespace isostream::testing {
 namespace {
-
-namespace pb = ::isostream::v1;
-using testing::Daemon;
-using testing::DaemonProcess;
-using testing::kIso;
-using testing::MakeView;
-using testing::ScratchDir;
 
 ExtractRequest DirectRequest(double eps, glm::dvec3 eye) {
   ExtractRequest r;
@@ -426,4 +421,4 @@ TEST_F(Daemon, StillServesAfterEverything) {
 }
 
 }  // namespace
-}  // namespace isostream
+}  // namespace isostream::testing
