@@ -1,6 +1,7 @@
 #include "client/net/session_client.h"
 
 #include "proto/health.grpc.pb.h"
+#include "shared/file_io.h"
 #include "shared/frame_codec.h"
 
 namespace isostream::net {
@@ -8,6 +9,38 @@ namespace isostream::net {
 absl::Status FromGrpc(const grpc::Status& s) {
   if (s.ok()) return absl::OkStatus();
   return absl::Status(absl::StatusCode(int(s.error_code())), s.error_message());
+}
+
+absl::StatusOr<std::string> ReadTlsCa(const std::string& path) {
+  auto pem = ReadFileBytes(path);  // refuses directories and other non-regular files
+  if (!pem.ok())
+    return absl::InvalidArgumentError("cannot read --tls-ca '" + path +
+                                      "': " + std::string(pem.status().message()));
+  if (pem->empty()) return absl::InvalidArgumentError("--tls-ca '" + path + "' holds no certificates");
+  return std::move(*pem);
+}
+
+std::string ExplainCallError(const absl::Status& s, const ClientOptions& options) {
+  const std::string m(s.message());
+  switch (s.code()) {
+    case absl::StatusCode::kUnavailable:
+      // Refused: nothing listens there, so TLS is not the question.
+      if (m.find("Connection refused") != std::string::npos)
+        return "cannot reach isostreamd at " + options.address + " (" + m + ")";
+      return "cannot reach isostreamd at " + options.address + " (" + m + ")" +
+             (options.tls_ca_pem.empty()
+                  ? "; connected without TLS: if the daemon serves TLS, pass --tls-ca"
+                  : "; connected with TLS: check that the daemon serves TLS with a certificate "
+                    "--tls-ca trusts");
+    case absl::StatusCode::kUnauthenticated:
+      return "the server refused the token (" + m + "); pass --token";
+    case absl::StatusCode::kNotFound:
+      return m;
+    case absl::StatusCode::kDeadlineExceeded:
+      return "the server did not answer in time (" + m + ")";
+    default:
+      return std::string(absl::StatusCodeToString(s.code())) + ": " + m;
+  }
 }
 
 absl::Status FrameAssembler::Add(const pb::FrameChunk& chunk) {
@@ -27,6 +60,15 @@ absl::Status FrameAssembler::Add(const pb::FrameChunk& chunk) {
                                std::to_string(next_chunk_) + " expected");
   if (chunk.first_triangle() != frame_.mesh.triangle_count())
     return absl::DataLossError("chunk triangle ranges are not contiguous");
+  // Counted from the chunk's own header, before anything is decoded (its triangle_count field
+  // is checked against the decoded data below).
+  ISOSTREAM_ASSIGN_OR_RETURN(const ChunkHeader header,
+                             ReadChunkHeader(chunk.data().data(), chunk.data().size()));
+  if (int64_t(frame_.mesh.triangle_count()) + int64_t(header.triangle_count) > max_triangles_ ||
+      int64_t(frame_.mesh.vertex_count()) + int64_t(header.vertex_count) > 3 * max_triangles_)
+    return absl::ResourceExhaustedError(
+        "frame " + std::to_string(frame_.id) + " grows past " + std::to_string(max_triangles_) +
+        " triangles, this client's limit per frame");
   const size_t before = frame_.mesh.triangle_count();
   ISOSTREAM_RETURN_IF_ERROR(DecodeAnyChunk(chunk.data().data(), chunk.data().size(), &frame_.mesh));
   if (frame_.mesh.triangle_count() - before != chunk.triangle_count())
@@ -183,22 +225,28 @@ absl::StatusOr<Frame> Client::Fetch(const pb::ViewRequest& view,
   grpc::ClientContext context;
   Prepare(&context, true);
   auto reader = stub_->Extract(&context, view);
-  FrameAssembler assembler;
+  FrameAssembler assembler(options_.max_frame_triangles);
   Frame result;
   bool have = false;
-  absl::Status problem;
   pb::FrameChunk chunk;
   while (reader->Read(&chunk)) {
     if (on_chunk) on_chunk(chunk);
-    if (!problem.ok()) continue;
-    problem = assembler.Add(chunk);
-    if (problem.ok() && assembler.complete() && !assembler.frame().coarse) {
+    const absl::Status added = assembler.Add(chunk);
+    if (!added.ok()) {
+      // Nothing more from this stream can be used: stop it instead of draining it (a server
+      // streaming without end would otherwise hold the call until its deadline).
+      context.TryCancel();
+      while (reader->Read(&chunk)) {
+      }
+      (void)reader->Finish();  // CANCELLED, by us
+      return added;
+    }
+    if (assembler.complete() && !assembler.frame().coarse) {
       result = assembler.Take();
       have = true;
     }
   }
   ISOSTREAM_RETURN_IF_ERROR(FromGrpc(reader->Finish()));
-  ISOSTREAM_RETURN_IF_ERROR(problem);
   if (!have) return absl::DataLossError("the stream ended without a complete frame");
   if (result.id != view.request_id())
     return absl::DataLossError("the server answered request " + std::to_string(view.request_id()) +

@@ -20,6 +20,10 @@ namespace isostream::net {
 
 namespace pb = ::isostream::v1;
 
+// Triangles a client accepts in one frame: 16x a daemon's default max_triangles. A server
+// that streams a frame past it is refused with RESOURCE_EXHAUSTED instead of filling memory.
+inline constexpr int64_t kDefaultMaxFrameTriangles = int64_t{1} << 26;
+
 struct ClientOptions {
   std::string address = "127.0.0.1:7878";
   std::string token;       // sent as "authorization: Bearer TOKEN" when not empty
@@ -27,7 +31,16 @@ struct ClientOptions {
   // Chunks are below 4 MiB; the explicit limit leaves room for a daemon with bigger chunks.
   int max_receive_bytes = 8 << 20;
   std::chrono::milliseconds call_timeout{30000};  // unary calls and one-shot frames
+  int64_t max_frame_triangles = kDefaultMaxFrameTriangles;
 };
+
+// The PEM root certificates in `path`, for ClientOptions::tls_ca_pem. InvalidArgument for a
+// file that cannot be read or holds nothing (an empty PEM would silently mean plaintext).
+absl::StatusOr<std::string> ReadTlsCa(const std::string& path);
+
+// The message for a failed call, with a hint where the code alone says little: UNAVAILABLE
+// names the address and whether TLS was used (a TLS mismatch also reads "failed to connect").
+std::string ExplainCallError(const absl::Status& status, const ClientOptions& options);
 
 // gRPC status -> absl status (the codes share their numbering).
 absl::Status FromGrpc(const grpc::Status& status);
@@ -46,15 +59,20 @@ struct Frame {
 // each frame's chunks consecutive, triangle ranges contiguous.
 class FrameAssembler {
  public:
+  explicit FrameAssembler(int64_t max_triangles = kDefaultMaxFrameTriangles)
+      : max_triangles_(max_triangles) {}
+
   // Decodes `chunk` into the frame in progress (a new frame id or coarse flag starts a new
   // frame, dropping an incomplete one: that frame was superseded). DataLoss/InvalidArgument
-  // for chunks that do not decode or arrive out of order.
+  // for chunks that do not decode or arrive out of order; ResourceExhausted, before decoding,
+  // for a chunk that takes the frame past max_triangles.
   absl::Status Add(const pb::FrameChunk& chunk);
   bool complete() const { return complete_; }
   const Frame& frame() const { return frame_; }
   Frame Take();
 
  private:
+  int64_t max_triangles_;
   Frame frame_;
   bool started_ = false;
   bool complete_ = false;
@@ -103,6 +121,8 @@ class Client {
                               const std::function<void(const pb::FrameChunk&)>& on_chunk = {});
 
   absl::StatusOr<std::unique_ptr<Session>> OpenSession();
+
+  const ClientOptions& options() const { return options_; }
 
  private:
   void Prepare(grpc::ClientContext* context, bool deadline) const;

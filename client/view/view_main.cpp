@@ -45,6 +45,8 @@ struct Args {
   std::string size = "800x800";
   std::string output;
   std::string token;
+  std::string tls_ca;
+  int64_t max_frame_triangles = net::kDefaultMaxFrameTriangles;
   std::string codec = "draco";
   int orbit = 0;
   bool window = false;
@@ -116,8 +118,9 @@ class Watchdog {
 // Gives up after `idle_limit` without a chunk (0: never).
 absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_id,
                                         render::MeshRenderer& renderer, int* coarse_frames,
-                                        std::chrono::seconds idle_limit) {
-  net::FrameAssembler assembler;
+                                        std::chrono::seconds idle_limit,
+                                        int64_t max_frame_triangles) {
+  net::FrameAssembler assembler(max_frame_triangles);
   pb::FrameChunk chunk;
   bool frame_open = false;
   Watchdog watchdog(session, idle_limit);
@@ -203,10 +206,20 @@ int Run(const Args& args) {
   net::ClientOptions options;
   options.address = args.server;
   options.token = args.token;
+  options.max_frame_triangles = args.max_frame_triangles;
+  if (!args.tls_ca.empty()) {
+    auto pem = net::ReadTlsCa(args.tls_ca);
+    if (!pem.ok()) return Fail(pem.status());
+    options.tls_ca_pem = std::move(*pem);
+  }
+  // Errors of calls to the daemon, with a hint where the code alone says little.
+  auto call_failed = [&](const absl::Status& s) {
+    return Fail(absl::Status(s.code(), net::ExplainCallError(s, options)));
+  };
   auto client = net::Client::Connect(options);
   if (!client.ok()) return Fail(client.status());
   auto info = (*client)->GetVolumeInfo(args.volume);
-  if (!info.ok()) return Fail(info.status());
+  if (!info.ok()) return call_failed(info.status());
   if (info->dims_size() != 3)
     return Fail(absl::DataLossError("the server described the volume with " +
                                     std::to_string(info->dims_size()) + " dims, not 3"));
@@ -294,7 +307,7 @@ int Run(const Args& args) {
   }
 
   auto session = (*client)->OpenSession();
-  if (!session.ok()) return Fail(session.status());
+  if (!session.ok()) return call_failed(session.status());
   const std::vector<render::Camera> cameras = args.orbit > 0
                                                   ? render::OrbitCameras(camera, args.orbit)
                                                   : std::vector<render::Camera>{camera};
@@ -303,11 +316,11 @@ int Run(const Args& args) {
     const pb::ViewRequest view = MakeViewRequest(state, cam, palette, i + 1);
     const auto t0 = std::chrono::steady_clock::now();
     const absl::Status sent = (*session)->Send(view);
-    if (!sent.ok()) return Fail(sent);
+    if (!sent.ok()) return call_failed(sent);
     int coarse = 0;
-    auto frame =
-        ReceiveFrame(**session, i + 1, **renderer, &coarse, std::chrono::seconds(args.timeout_s));
-    if (!frame.ok()) return Fail(frame.status());
+    auto frame = ReceiveFrame(**session, i + 1, **renderer, &coarse,
+                              std::chrono::seconds(args.timeout_s), args.max_frame_triangles);
+    if (!frame.ok()) return call_failed(frame.status());
     const double ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     // The draw order depends on the eye only, so the field of view can wait for the frame:
@@ -326,7 +339,8 @@ int Run(const Args& args) {
   }
   (*session)->CloseSend().IgnoreError();
   const absl::Status finished = (*session)->Finish();
-  if (!finished.ok() && finished.code() != absl::StatusCode::kCancelled) return Fail(finished);
+  if (!finished.ok() && finished.code() != absl::StatusCode::kCancelled)
+    return call_failed(finished);
   return 0;
 }
 
@@ -349,6 +363,10 @@ int main(int argc, char** argv) {
   app.add_option("--orbit", args.orbit, "write N views on a full turn around the volume")
       ->check(CLI::Range(1, 3600));
   app.add_option("--token", args.token, "bearer token");
+  app.add_option("--tls-ca", args.tls_ca, "PEM root certificates: connect with TLS");
+  app.add_option("--max-frame-triangles", args.max_frame_triangles,
+                 "refuse a frame past this many triangles (default 2^26)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
   app.add_option("--codec", args.codec, "draco (default) or raw")
       ->check(CLI::IsMember({"draco", "raw"}));
   app.add_flag("--window", args.window,

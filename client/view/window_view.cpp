@@ -216,7 +216,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
 
   ViewState state = options.state;
   uint64_t request_id = 0;
-  net::FrameAssembler assembler;
+  net::FrameAssembler assembler(client.options().max_frame_triangles);
   bool frame_open = false;
   int refined_frames = 0;
   absl::Status result;

@@ -1,9 +1,7 @@
 // `isostream fetch`: asks a running isostreamd for one frame and writes it, decoded, as PLY.
 // The view flags are `extract`'s, so a fetched frame can be compared with a local extraction.
 #include <cstdio>
-#include <fstream>
 #include <iostream>
-#include <sstream>
 
 #include "client/net/session_client.h"
 #include "server/cli/cli_common.h"
@@ -22,27 +20,11 @@ struct FetchArgs {
   std::string token;
   std::string codec = "draco";
   std::string tls_ca;
+  int64_t max_frame_triangles = net::kDefaultMaxFrameTriangles;
   bool progressive = false;
   std::string output;
   bool stats = false;
 };
-
-// The message for a failed call, with a hint where the code alone says little.
-std::string Explain(const absl::Status& s, const FetchArgs& args) {
-  std::string m(s.message());
-  switch (s.code()) {
-    case absl::StatusCode::kUnavailable:
-      return "cannot reach isostreamd at " + args.server + " (" + m + ")";
-    case absl::StatusCode::kUnauthenticated:
-      return "the server refused the token (" + m + "); pass --token";
-    case absl::StatusCode::kNotFound:
-      return m;
-    case absl::StatusCode::kDeadlineExceeded:
-      return "the server did not answer in time (" + m + ")";
-    default:
-      return std::string(absl::StatusCodeToString(s.code())) + ": " + m;
-  }
-}
 
 pb::ViewRequest ToViewRequest(const ExtractRequest& r, const FetchArgs& args) {
   pb::ViewRequest v;
@@ -88,15 +70,11 @@ int RunFetch(const FetchArgs& args) {
   net::ClientOptions options;
   options.address = args.server;
   options.token = args.token;
+  options.max_frame_triangles = args.max_frame_triangles;
   if (!args.tls_ca.empty()) {
-    std::ifstream in(args.tls_ca);
-    if (!in) return fail("cannot read --tls-ca '" + args.tls_ca + "'", 2);
-    std::stringstream s;
-    s << in.rdbuf();
-    options.tls_ca_pem = s.str();
-    // An empty PEM would mean plaintext (a directory also opens and reads as empty).
-    if (options.tls_ca_pem.empty())
-      return fail("--tls-ca '" + args.tls_ca + "' holds no certificates", 2);
+    auto pem = net::ReadTlsCa(args.tls_ca);
+    if (!pem.ok()) return fail(std::string(pem.status().message()), 2);
+    options.tls_ca_pem = std::move(*pem);
   }
   auto client = net::Client::Connect(options);
   if (!client.ok()) return fail(std::string(client.status().message()), 1);
@@ -106,7 +84,7 @@ int RunFetch(const FetchArgs& args) {
   Volume bounds;
   if (args.view.eye_flag->count() == 0 && args.view.view_dir_flag->count() == 0) {
     auto info = (*client)->GetVolumeInfo(args.volume, 1);
-    if (!info.ok()) return fail(Explain(info.status(), args), 1);
+    if (!info.ok()) return fail(net::ExplainCallError(info.status(), options), 1);
     for (int a = 0; a < 3 && a < info->dims_size(); ++a) bounds.dims[a] = info->dims(a);
     bounds.spacing = {info->spacing().x(), info->spacing().y(), info->spacing().z()};
     bounds.origin = {info->origin().x(), info->origin().y(), info->origin().z()};
@@ -115,7 +93,7 @@ int RunFetch(const FetchArgs& args) {
   if (!request.ok()) return fail(std::string(request.status().message()), 2);
 
   auto frame = (*client)->Fetch(ToViewRequest(*request, args));
-  if (!frame.ok()) return fail(Explain(frame.status(), args), 1);
+  if (!frame.ok()) return fail(net::ExplainCallError(frame.status(), options), 1);
   const absl::Status written = WritePly(frame->mesh, args.output);
   if (!written.ok()) return fail(std::string(written.message()), 1);
   if (args.stats) {
@@ -152,6 +130,9 @@ CLI::App* AddFetchCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--codec", args->codec, "draco (default) or raw")
       ->check(CLI::IsMember({"draco", "raw"}));
   cmd->add_option("--tls-ca", args->tls_ca, "PEM root certificates: connect with TLS");
+  cmd->add_option("--max-frame-triangles", args->max_frame_triangles,
+                  "refuse a frame past this many triangles (default 2^26)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
   cmd->add_flag("--progressive", args->progressive, "let the server send a coarse frame first");
   cmd->add_option("-o,--output", args->output, "out.ply")->required();
   cmd->add_flag("--stats", args->stats, "print counts, sizes and timings");

@@ -5,7 +5,6 @@
 
 #include <atomic>
 #include <fstream>
-#include <sstream>
 #include <thread>
 
 #include "tests/integration/daemon_fixture.h"
@@ -297,21 +296,17 @@ class TlsDaemon : public Daemon {};
 
 TEST_F(TlsDaemon, ServesOverTls) {
   ScratchDir dir;
-  const std::string key = dir.path() + "/key.pem", cert = dir.path() + "/cert.pem";
-  const std::string make =
-      "openssl req -x509 -newkey rsa:2048 -nodes -keyout " + key + " -out " + cert +
-      " -days 1 -subj /CN=localhost -addext subjectAltName=IP:127.0.0.1,DNS:localhost "
-      ">/dev/null 2>&1";
-  if (std::system(make.c_str()) != 0) GTEST_SKIP() << "openssl cannot make a test certificate";
+  std::string key, cert;
+  if (!MakeTestCertificate(dir.path(), &key, &cert))
+    GTEST_SKIP() << "openssl cannot make a test certificate";
   DaemonProcess tls;
   ASSERT_TRUE(tls.Start({"--tls-cert", cert, "--tls-key", key, "--no-cache"},
                         dir.path() + "/isostreamd.log"));
-  std::ifstream in(cert);
-  std::stringstream pem;
-  pem << in.rdbuf();
+  auto pem = net::ReadTlsCa(cert);
+  ASSERT_TRUE(pem.ok()) << pem.status();
   net::ClientOptions o;
   o.address = tls.address();
-  o.tls_ca_pem = pem.str();
+  o.tls_ca_pem = *pem;
   auto secure = net::Client::Connect(o);
   ASSERT_TRUE(secure.ok());
   auto frame = (*secure)->Fetch(MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2)));
@@ -320,7 +315,11 @@ TEST_F(TlsDaemon, ServesOverTls) {
   o.call_timeout = std::chrono::milliseconds(2000);
   auto plain = net::Client::Connect(o);
   ASSERT_TRUE(plain.ok());
-  EXPECT_FALSE((*plain)->ListVolumes().ok());
+  const auto refused = (*plain)->ListVolumes();
+  ASSERT_FALSE(refused.ok());
+  // gRPC says only "failed to connect": the explanation names TLS.
+  EXPECT_NE(net::ExplainCallError(refused.status(), o).find("--tls-ca"), std::string::npos)
+      << refused.status();
   EXPECT_EQ(tls.Stop(SIGTERM), 0);
 }
 

@@ -125,4 +125,16 @@ class DaemonProcess {
   int port_ = 0;
 };
 
+// A self-signed certificate for 127.0.0.1 and localhost in `dir` (key.pem, cert.pem), made by
+// openssl; false if openssl cannot make one (the caller skips its TLS test then).
+inline bool MakeTestCertificate(const std::string& dir, std::string* key, std::string* cert) {
+  *key = dir + "/key.pem";
+  *cert = dir + "/cert.pem";
+  const std::string make =
+      "openssl req -x509 -newkey rsa:2048 -nodes -keyout " + *key + " -out " + *cert +
+      " -days 1 -subj /CN=localhost -addext subjectAltName=IP:127.0.0.1,DNS:localhost "
+      ">/dev/null 2>&1";
+  return std::system(make.c_str()) == 0;
+}
+
 }  // namespace isostream::testing

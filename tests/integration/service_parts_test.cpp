@@ -201,8 +201,9 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
 
   // The client puts them back together; a frame whose last chunk comes early, or whose last
   // chunk's counts disagree with what arrived, is DATA_LOSS, not a smaller frame.
-  auto assemble = [](const std::vector<::isostream::v1::FrameChunk>& chunks) {
-    net::FrameAssembler a;
+  auto assemble = [](const std::vector<::isostream::v1::FrameChunk>& chunks,
+                     int64_t max_triangles = net::kDefaultMaxFrameTriangles) {
+    net::FrameAssembler a(max_triangles);
     for (const auto& c : chunks) {
       const absl::Status s = a.Add(c);
       if (!s.ok()) return s;
@@ -220,6 +221,17 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   auto miscounted = sink.chunks_;
   miscounted.back().set_chunk_count(miscounted.back().chunk_count() + 1);
   EXPECT_EQ(assemble(miscounted).code(), absl::StatusCode::kDataLoss);
+  // A frame past the client's limit is refused at the chunk that would pass it (a server
+  // streaming one frame without end cannot fill the client's memory); exactly at it, it fits.
+  EXPECT_TRUE(assemble(sink.chunks_, int64_t(next)).ok());
+  net::FrameAssembler limited(int64_t(next) - 1);
+  absl::Status refused;
+  size_t refused_at = 0;
+  for (; refused_at < sink.chunks_.size() && refused.ok(); ++refused_at)
+    refused = limited.Add(sink.chunks_[refused_at]);
+  EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted) << refused;
+  EXPECT_EQ(refused_at, sink.chunks_.size());  // the last chunk, before decoding it
+  EXPECT_EQ(limited.frame().mesh.triangle_count(), next - sink.chunks_.back().triangle_count());
 }
 
 }  // namespace

@@ -144,6 +144,37 @@ TEST(View, WindowReopensASessionTheDaemonClosedAsIdle) {
   EXPECT_NE(text.find("idle"), std::string::npos) << "the session was never closed as idle";
 }
 
+// A daemon serving TLS: the viewer connects with --tls-ca; without it, the failure names TLS;
+// an empty CA file is refused before connecting (it would have meant plaintext).
+TEST(View, ConnectsOverTlsWithItsCa) {
+  testing::ScratchDir dir;
+  std::string key, cert;
+  if (!testing::MakeTestCertificate(dir.path(), &key, &cert))
+    GTEST_SKIP() << "openssl cannot make a test certificate";
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--tls-cert", cert, "--tls-key", key, "--no-cache"},
+                           dir.path() + "/daemon.log"));
+  const std::string png = dir.path() + "/tls.png";
+  const std::string common = "--server " + daemon.address() +
+                             " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 -o " + png;
+  const ViewRun secure = View(common + " --tls-ca " + cert);
+  ASSERT_EQ(secure.code, 0) << secure.output;
+  auto image = render::ReadPng(png);
+  ASSERT_TRUE(image.ok()) << image.status();
+  EXPECT_GT(Coverage(*image), 0.05);
+
+  const ViewRun plain = View(common + " --timeout-s 5");
+  EXPECT_NE(plain.code, 0);
+  EXPECT_NE(plain.output.find("--tls-ca"), std::string::npos) << plain.output;
+
+  const std::string empty = dir.path() + "/empty.pem";
+  std::ofstream(empty).close();
+  const ViewRun no_ca = View(common + " --tls-ca " + empty);
+  EXPECT_NE(no_ca.code, 0);
+  EXPECT_NE(no_ca.output.find("holds no certificates"), std::string::npos) << no_ca.output;
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 TEST(View, CorruptChunkBytesAreAnErrorNotACrash) {
   net::FrameAssembler assembler;
   ::isostream::v1::FrameChunk chunk;

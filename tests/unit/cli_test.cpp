@@ -6,6 +6,7 @@
 
 #include "server/extract/extractor.h"
 #include "server/hierarchy/prepared_volume.h"
+#include "shared/file_io.h"
 #include "shared/ply_io.h"
 #include "tests/common/run_command.h"
 
@@ -77,12 +78,16 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
     EXPECT_NE(r.code, 0) << c.args;
     EXPECT_NE(r.output.find(c.message), std::string::npos) << c.args << "\n" << r.output;
   }
-  // An empty CA file would have meant plaintext: refused before connecting.
-  const CliRun no_ca = Cli("fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 "
-                           "--tls-ca /dev/null -o " +
-                           out);
-  EXPECT_NE(no_ca.code, 0);
-  EXPECT_NE(no_ca.output.find("holds no certificates"), std::string::npos) << no_ca.output;
+  // An empty CA file would have meant plaintext: refused before connecting, as is a device.
+  const std::string empty_ca = TempPath("cli-empty-ca.pem");
+  ASSERT_TRUE(WriteFileBytes(empty_ca, "").ok());
+  for (const auto& [ca, message] : {std::pair<std::string, std::string>{empty_ca, "holds no certificates"},
+                                    {"/dev/null", "not a regular file"}}) {
+    const CliRun r = Cli("fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 "
+                         "--tls-ca " + ca + " -o " + out);
+    EXPECT_EQ(r.code, 2) << ca;
+    EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
+  }
 }
 
 // Two samples per axis is a valid volume: it pads to the smallest hierarchy, 3^3.
