@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <string>
@@ -13,6 +14,7 @@
 #include "client/net/session_client.h"
 #include "client/render/image.h"
 #include "daemon_process.h"
+#include "misbehaving_server.h"
 #include "tests/common/run_command.h"
 
 namespace isostream {
@@ -173,6 +175,40 @@ TEST(View, ConnectsOverTlsWithItsCa) {
   EXPECT_NE(no_ca.code, 0);
   EXPECT_NE(no_ca.output.find("holds no certificates"), std::string::npos) << no_ca.output;
   EXPECT_EQ(daemon.Stop(), 0);
+}
+
+// Servers that break the contract: the viewer ends with a clear error instead of crashing on a
+// volume info without 3 dims, waiting forever on a stalled session, or growing an endless frame
+// until memory runs out.
+TEST(View, MisbehavingServersGiveClearErrors) {
+  testing::ScratchDir dir;
+  const std::string png = dir.path() + "/never.png";
+  const std::string common = " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 -o " + png;
+  {
+    testing::MisbehavingServer server(testing::Misbehaviour::kTwoDims);
+    ASSERT_TRUE(server.ok());
+    const ViewRun r = View("--server " + server.address() + common);
+    EXPECT_EQ(r.code, 1);
+    EXPECT_NE(r.output.find("2 dims, not 3"), std::string::npos) << r.output;
+  }
+  {
+    testing::MisbehavingServer server(testing::Misbehaviour::kStall);
+    ASSERT_TRUE(server.ok());
+    const ViewRun r = View("--server " + server.address() + common + " --timeout-s 1");
+    EXPECT_EQ(r.code, 1);
+    EXPECT_NE(r.output.find("no data from the server for 1 s"), std::string::npos) << r.output;
+  }
+  {
+    testing::MisbehavingServer server(testing::Misbehaviour::kEndlessFrame);
+    ASSERT_TRUE(server.ok());
+    const ViewRun r = View("--server " + server.address() + common +
+                           " --max-frame-triangles 1000 --timeout-s 30");
+    EXPECT_EQ(r.code, 1);
+    EXPECT_NE(r.output.find("grows past 1000 triangles"), std::string::npos) << r.output;
+    // The viewer stopped the stream; the server did not run out of chunks to send.
+    EXPECT_LT(server.chunks_sent(), testing::MisbehavingServer::kMaxChunks);
+  }
+  EXPECT_FALSE(std::filesystem::exists(png));
 }
 
 TEST(View, CorruptChunkBytesAreAnErrorNotACrash) {

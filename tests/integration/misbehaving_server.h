@@ -1,0 +1,111 @@
+// A gRPC server on 127.0.0.1 that speaks the isostream contract badly, for the clients' tests:
+// a volume info with the wrong number of dims, a session that never sends a chunk, or a frame
+// that never ends. Only what a client meets is implemented (GetVolumeInfo and Session).
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "proto/isostream.grpc.pb.h"
+#include "shared/frame_codec.h"
+#include "shared/ordered_mesh.h"
+
+namespace isostream::testing {
+
+enum class Misbehaviour {
+  kTwoDims,       // GetVolumeInfo describes the volume with 2 dims
+  kStall,         // Session reads the view and then sends nothing
+  kEndlessFrame,  // Session answers the view with chunks of one frame that never ends
+};
+
+class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
+ public:
+  // Bounds the endless frame, so a client that never gives up cannot keep the test running.
+  static constexpr int kMaxChunks = 20000;
+  static constexpr int kTrianglesPerChunk = 100;
+
+  explicit MisbehavingServer(Misbehaviour how) : how_(how) {
+    grpc::ServerBuilder builder;
+    builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port_);
+    builder.RegisterService(this);
+    server_ = builder.BuildAndStart();
+  }
+  ~MisbehavingServer() override {
+    stop_ = true;
+    if (server_) server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+  }
+
+  bool ok() const { return server_ != nullptr && port_ > 0; }
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  int chunks_sent() const { return chunks_sent_.load(); }
+
+  grpc::Status GetVolumeInfo(grpc::ServerContext*, const ::isostream::v1::GetVolumeInfoRequest* r,
+                             ::isostream::v1::VolumeInfo* info) override {
+    info->set_name(r->name());
+    for (int a = 0; a < (how_ == Misbehaviour::kTwoDims ? 2 : 3); ++a) info->add_dims(33);
+    info->mutable_spacing()->set_x(1);
+    info->mutable_spacing()->set_y(1);
+    info->mutable_spacing()->set_z(1);
+    info->set_min_value(0);
+    info->set_max_value(1);
+    return grpc::Status::OK;
+  }
+
+  grpc::Status Session(grpc::ServerContext* context,
+                       grpc::ServerReaderWriter<::isostream::v1::FrameChunk,
+                                                ::isostream::v1::ViewRequest>* stream) override {
+    ::isostream::v1::ViewRequest view;
+    if (!stream->Read(&view)) return grpc::Status::OK;
+    if (how_ == Misbehaviour::kEndlessFrame) {
+      std::string data;
+      const OrderedMesh strip = Strip(kTrianglesPerChunk);
+      if (!EncodeChunkRaw(strip, 0, strip.triangle_count(), &data).ok())
+        return grpc::Status(grpc::StatusCode::INTERNAL, "cannot encode the test chunk");
+      ::isostream::v1::FrameChunk chunk;
+      chunk.set_frame_id(view.request_id());
+      chunk.set_triangle_count(kTrianglesPerChunk);
+      chunk.set_data(data);
+      for (int i = 0; i < kMaxChunks && !context->IsCancelled() && !stop_; ++i) {
+        chunk.set_chunk_index(uint32_t(i));
+        chunk.set_first_triangle(uint64_t(i) * kTrianglesPerChunk);
+        if (!stream->Write(chunk)) break;
+        ++chunks_sent_;
+      }
+      return grpc::Status::OK;
+    }
+    // Silence until the client leaves (or the test ends).
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!context->IsCancelled() && !stop_ && std::chrono::steady_clock::now() < give_up)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return grpc::Status(grpc::StatusCode::CANCELLED, "stalled");
+  }
+
+ private:
+  // A strip of `n` triangles inside the unit cube.
+  static OrderedMesh Strip(int n) {
+    OrderedMesh m;
+    for (int i = 0; i < n + 2; ++i) {
+      const float x = float(i) / float(n + 2);
+      m.positions.insert(m.positions.end(), {x, float(i % 2), 0.5f});
+      m.normals.insert(m.normals.end(), {0.0f, 0.0f, 1.0f});
+    }
+    for (int i = 0; i < n; ++i) {
+      m.triangles.insert(m.triangles.end(), {uint32_t(i), uint32_t(i + 1), uint32_t(i + 2)});
+      m.surface.push_back(0);
+    }
+    return m;
+  }
+
+  const Misbehaviour how_;
+  int port_ = 0;
+  std::unique_ptr<grpc::Server> server_;
+  std::atomic<bool> stop_{false};
+  std::atomic<int> chunks_sent_{0};
+};
+
+}  // namespace isostream::testing
