@@ -7,6 +7,7 @@
 // triangles first. Vertices on a subtree's boundary faces are merged by edge key on append.
 #include "server/extract/extractor.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -22,11 +23,13 @@
 #include <numeric>
 #include <optional>
 
+#include "server/extract/budget_search.h"
 #include "server/extract/traversal.h"
 
 namespace isostream {
 
 using extract_internal::Context;
+using extract_internal::CountCurve;
 using extract_internal::Decide;
 using extract_internal::Decision;
 using extract_internal::Node;
@@ -141,8 +144,10 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
 }
 
 // Cuts the top of the tree into subtrees in draw order. Deterministic (independent of the
-// thread count) so the output is too.
-std::vector<Node> SplitIntoSubtrees(const Context& c) {
+// thread count) so the output is too. With a curve (a count pass that gathers one), the nodes
+// refined here add their share to it as the traversal's do, and pass their eta caps down.
+std::vector<Node> SplitIntoSubtrees(const Context& c,
+                                    extract_internal::CountCurve* curve = nullptr) {
   const ReferenceTets& tables = *c.tables;
   const int size = 1 << c.k;
   int order[kNumInitialTets];
@@ -173,6 +178,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
     t.xref_value = c.ValueOffset(x);
     t.xref_eta = c.EtaOffset(x);
     t.child0_first = extract_internal::ChildZeroFirst(c, t.cls, x);
+    t.eta_cap = extract_internal::kInfiniteEtaCode;
     items.push_back(t);
   }
   constexpr size_t kTargetSubtrees = 256;
@@ -182,13 +188,22 @@ std::vector<Node> SplitIntoSubtrees(const Context& c) {
     bool refined = false;
     for (const Node& t : items) {
       const Decision d = Decide(c, t);
-      if (d == Decision::kCull) continue;
+      if (d == Decision::kCull) {
+        if (curve && t.level < 3 * c.k)  // as the traversal does
+          curve->NoteStop(extract_internal::EtaCode(c, t));
+        continue;
+      }
       if (d == Decision::kLeaf) {
         next.push_back(t);
         continue;
       }
       Node kids[2];
       extract_internal::Bisect(c, t, &kids[0], &kids[1]);
+      if (curve) {
+        const uint32_t code = extract_internal::EtaCode(c, t);
+        curve->Add(code + 1, t.eta_cap, extract_internal::LeafTriangles(c, t));
+        kids[0].eta_cap = kids[1].eta_cap = std::min(t.eta_cap, code);
+      }
       next.push_back(kids[0]);
       next.push_back(kids[1]);
       refined = true;
@@ -210,21 +225,27 @@ absl::Status StopReason(const ExtractObserver* observer) {
   return absl::OkStatus();
 }
 
-// A count pass stopped by its observer sets *stopped (its count is then meaningless).
+// A count pass stopped by its observer sets *stopped (its count is then meaningless). With a
+// curve, `c` must have blocks off, and the curve is complete only if the count is <= limit.
 int64_t CountAt(const Context& c, int64_t limit, const ExtractObserver* observer = nullptr,
-                absl::Status* stopped = nullptr) {
-  const std::vector<Node> items = SplitIntoSubtrees(c);
+                absl::Status* stopped = nullptr, CountCurve* curve = nullptr) {
+  const std::vector<Node> items = SplitIntoSubtrees(c, curve);
   std::atomic<int64_t> total{0};
   std::atomic<bool> halted{false};
+  // One curve per worker thread, summed at the end (a few to a few hundred KB each).
+  std::optional<tbb::enumerable_thread_specific<CountCurve>> curves;
+  if (curve) curves.emplace(curve->first(), curve->last());
   tbb::parallel_for(size_t(0), items.size(), [&](size_t i) {
     if (total.load(std::memory_order_relaxed) > limit || halted.load()) return;
     if (observer && !StopReason(observer).ok()) {
       halted = true;
       return;
     }
-    Traverser<false> t(c, nullptr, nullptr);
+    Traverser<false> t(c, nullptr, nullptr, curve ? &curves->local() : nullptr);
     total += t.Run(items[i], limit);
   });
+  if (curve)
+    for (const CountCurve& part : *curves) curve->Merge(part);
   if (halted && stopped) *stopped = StopReason(observer);
   // Past the limit the sum depends on which subtrees ran before the others stopped (thread
   // timing): report limit + 1, so the budget search is deterministic and view-independent.
@@ -242,6 +263,22 @@ absl::StatusOr<int64_t> CountTriangles(const Hierarchy& h, const GridToWorld& xf
   return arena.execute([&] { return CountAt(c, limit); });
 }
 
+absl::StatusOr<std::vector<int64_t>> CountTrianglesPerEtaCode(const Hierarchy& h,
+                                                              const GridToWorld& xf,
+                                                              const ExtractRequest& r,
+                                                              uint32_t first_code,
+                                                              uint32_t last_code) {
+  ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
+  if (first_code > last_code || last_code > extract_internal::kInfiniteEtaCode)
+    return absl::InvalidArgumentError("eta codes must satisfy first <= last <= 0x7f80");
+  Context c = MakeContext(h, xf, r, extract_internal::EdgeEps(first_code));
+  c.block_level = -1;
+  CountCurve curve(first_code, last_code);
+  tbb::task_arena arena(r.threads > 0 ? r.threads : tbb::task_arena::automatic);
+  arena.execute([&] { CountAt(c, INT64_MAX, nullptr, nullptr, &curve); });
+  return curve.Counts();
+}
+
 absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
                                       const ExtractRequest& r, const ExtractObserver* observer) {
   ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
@@ -257,12 +294,10 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   if (remembered) {
     eps = *remembered;
   } else if (r.budget > 0) {
-    // Triangle count never grows with eps (saturated eta nests the meshes), so the smallest
-    // eps that fits is bracketed and the bracket shrunk until its ends are within 1% of each
-    // other: then 0.99 eps no longer fits. Probes count triangles only and stop at 4x the
-    // budget. Steps are regula falsi on log(count) over log(eps) (counts of smooth surfaces
-    // follow a power law in eps), with the Illinois fix so a stale end cannot stall it;
-    // before a "too many" end is known, the step extrapolates with slope -1.
+    // Triangle count never grows with eps (saturated eta nests the meshes) and changes only
+    // at eta codes: the answer is the smallest code whose count fits (budget_search.h), found
+    // by passes that count only, stop at 4x the budget and gather the count at every coarser
+    // code on the way (count_curve.h; node by node, as blocks skip the etas it needs).
     auto t0 = std::chrono::steady_clock::now();
     const int half = (h.n() - 1) / 2;
     // Saturated: a budget past any frame ("everything") must not overflow the limit.
@@ -271,62 +306,23 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     // A stopped pass ends the search: the request is answered with why, and nothing is
     // remembered.
     absl::Status stopped;
-    auto count_at = [&](double e) -> int64_t {
+    auto count_at = [&](uint32_t code, CountCurve* curve) -> std::optional<int64_t> {
       if (stopped.ok()) stopped = StopReason(observer);
-      if (!stopped.ok()) return 0;
-      ++st.budget_passes;
-      return CountAt(MakeContext(h, xf, r, e), limit, observer, &stopped);
+      if (!stopped.ok()) return std::nullopt;
+      Context c = MakeContext(h, xf, r, extract_internal::EdgeEps(code));
+      if (curve) c.block_level = -1;
+      const int64_t n = CountAt(c, limit, observer, &stopped, curve);
+      if (!stopped.ok()) return std::nullopt;
+      return n;
     };
-    arena.execute([&] {
-      // The root's eta is +inf when the samples' wavelets pass the float range; every finite
-      // eta is below the largest float, which then brackets the search.
-      const double root_eta =
-          std::min(double(h.eta(half, half, half)), double(std::numeric_limits<float>::max()));
-      const double x_root = std::log(root_eta * 1.0001 + 1e-30);
-      double x_hi = x_root;
-      int64_t count_hi = count_at(std::exp(x_hi));
-      double y_hi = std::log(double(std::max<int64_t>(count_hi, 1)));
-      double x_lo = 0, y_lo = 0;
-      bool have_lo = false;
-      int last_moved = 0, repeats = 0;
-      double stride = 1;
-      const double target = std::log(double(r.budget));
-      // Even the coarsest mesh is over budget (a budget below a few dozen triangles, or etas
-      // forced to +inf): nothing fits, the coarsest is the answer.
-      const bool nothing_fits = count_hi > r.budget;
-      for (int i = 0; i < 60 && !nothing_fits && stopped.ok(); ++i) {
-        if (have_lo && x_hi - x_lo < std::log(1.01)) break;
-        double x;
-        if (!have_lo) {
-          if (x_hi < x_root - 35) break;  // fits at ~1e-15 of the root's eta: use eps = 0
-          x = std::max(x_hi - stride * 1.05 * std::max(target - y_hi, 0.1), x_root - 36);
-        } else {
-          const double w = x_hi - x_lo;
-          x = y_lo > y_hi ? x_lo + (y_lo - target) / (y_lo - y_hi) * w : x_lo + 0.5 * w;
-          x = std::clamp(x, x_lo + 0.02 * w, x_hi - 0.02 * w);
-        }
-        const int64_t count = count_at(std::exp(x));
-        const int moved = count <= r.budget ? 1 : -1;
-        repeats = moved == last_moved ? repeats + 1 : 0;
-        last_moved = moved;
-        if (moved > 0) {
-          // A count that did not move is a plateau (counts are steps, not a power law, where
-          // whole regions stop refining at once): stride over it, doubling.
-          stride = count == count_hi ? 2 * stride : 1;
-          x_hi = x, count_hi = count, y_hi = std::log(double(std::max<int64_t>(count, 1)));
-          if (repeats > 0 && have_lo) y_lo = target + 0.5 * (y_lo - target);  // Illinois
-        } else {
-          x_lo = x, y_lo = std::log(double(count)), have_lo = true;
-          if (repeats > 0) y_hi = target + 0.5 * (y_hi - target);
-        }
-      }
-      eps = std::exp(x_hi);
-      if (!have_lo && !nothing_fits) {
-        const int64_t count_zero = count_at(0.0);
-        if (count_zero <= r.budget) eps = 0.0, count_hi = count_zero;
-      }
-      if (count_hi <= r.budget) counted = count_hi;  // else a sentinel past the search's limit
-    });
+    // The root's eta is the largest (saturated); one code above it nothing refines.
+    const uint32_t top = std::min(extract_internal::CodeAtLeast(h.eta(half, half, half)) + 1,
+                                  extract_internal::kInfiniteEtaCode);
+    const extract_internal::BudgetSearchResult found = arena.execute(
+        [&] { return extract_internal::FindBudgetCode(r.budget, limit, top, count_at); });
+    st.budget_passes = found.passes;
+    eps = extract_internal::EdgeEps(found.code);
+    counted = found.count;
     if (!stopped.ok()) return stopped;
     st.budget_ms = Ms(t0);
     if (r.budget_memo) r.budget_memo->Store(r.isovalues, r.budget, eps);

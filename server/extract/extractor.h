@@ -10,7 +10,9 @@
 
 #include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <functional>
+#include <vector>
 
 #include "server/extract/extract_request.h"
 #include "server/hierarchy/hierarchy.h"
@@ -47,5 +49,15 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& hierarchy, const GridToWo
 absl::StatusOr<int64_t> CountTriangles(const Hierarchy& hierarchy, const GridToWorld& xf,
                                        const ExtractRequest& request, double eps,
                                        int64_t limit = INT64_MAX);
+
+// The triangle count as a function of eps, from one counting pass: element i is the count at
+// the eps of eta code first_code + i (the float with bits code << 16; etas are stored as such
+// codes, so the count only changes at them and is constant between). Codes run to
+// last_code <= 0x7f80 (+inf). What the budget search reads; exposed for tests and tools.
+absl::StatusOr<std::vector<int64_t>> CountTrianglesPerEtaCode(const Hierarchy& hierarchy,
+                                                              const GridToWorld& xf,
+                                                              const ExtractRequest& request,
+                                                              uint32_t first_code,
+                                                              uint32_t last_code);
 
 }  // namespace isostream

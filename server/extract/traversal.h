@@ -21,6 +21,7 @@
 #include <utility>
 
 #include "server/extract/block_sets.h"
+#include "server/extract/count_curve.h"
 #include "server/extract/edge_vertex_table.h"
 #include "server/extract/leaf_emitter.h"
 #include "server/extract/subtree_mesh.h"
@@ -29,12 +30,15 @@
 
 namespace isostream::extract_internal {
 
-// Emits triangles (kEmit) or only counts them, for one subtree.
+// Emits triangles (kEmit) or only counts them, for one subtree. A count pass may also gather
+// the count at every coarser eps into `curve` (count_curve.h); its context must have blocks off
+// (block_level -1), since the curve needs the eta of every node the blocks skip.
 template <bool kEmit>
 class Traverser {
  public:
-  Traverser(const Context& c, EdgeVertexTable* table, SubtreeMesh* out)
-      : c_(c), emit_(c, table, out) {}
+  Traverser(const Context& c, EdgeVertexTable* table, SubtreeMesh* out,
+            CountCurve* curve = nullptr)
+      : c_(c), emit_(c, table, out), curve_(curve) {}
 
   // Returns the triangle count (stops early past `limit` when counting).
   int64_t Run(const Node& root, int64_t limit = INT64_MAX) {
@@ -60,13 +64,29 @@ class Traverser {
             break;
           }
           Bisect(c_, *cur, spare, &stack[top++]);
+          if (!kEmit && curve_) {
+            // A leaf for the edges above its own eta, up to where an ancestor stops first.
+            const uint32_t code = EtaCode(c_, *cur);
+            curve_->Add(code + 1, cur->eta_cap, LeafTriangles(c_, *cur));
+            spare->eta_cap = stack[top - 1].eta_cap = std::min(cur->eta_cap, code);
+          }
           std::swap(cur, spare);
           continue;
-        case Decision::kLeaf:
-          triangles += emit_.Leaf(*cur, first, last);
+        case Decision::kLeaf: {
+          const int n = emit_.Leaf(*cur, first, last);
+          triangles += n;
+          // Its eta (if any) is below this pass's eps: a leaf at every edge the curve holds.
+          if (!kEmit && curve_) {
+            curve_->Add(0, cur->eta_cap, n);
+            if (cur->level < 3 * c_.k) curve_->NoteStop(EtaCode(c_, *cur));
+          }
           if (!kEmit && triangles > limit) return triangles;  // counting: enough seen
           break;
+        }
         case Decision::kCull:
+          // A leaf without crossings may gain some below its eta (culled ones never do; noting
+          // them too only shortens what the curve claims is constant).
+          if (!kEmit && curve_ && cur->level < 3 * c_.k) curve_->NoteStop(EtaCode(c_, *cur));
           break;
       }
       if (top == 0) break;
@@ -174,7 +194,7 @@ class Traverser {
     Node t;
     for (int i = 0; i < 4; ++i) t.v[i] = fr.p[b.corner[i]], t.f[i] = fr.f[b.corner[i]];
     t.cls = b.cls;
-    t.level = fr.root->level + depth;
+    t.level = uint8_t(fr.root->level + depth);
     // The gradient is needed for flat normals, and otherwise only to order several crossing
     // surfaces or when central differences vanish: computed on demand then (LeafGradient).
     if (c_.normals != NormalMode::kSmooth) {
@@ -212,6 +232,7 @@ class Traverser {
 
   const Context& c_;
   LeafEmitter<kEmit> emit_;
+  CountCurve* curve_;
 };
 
 }  // namespace isostream::extract_internal

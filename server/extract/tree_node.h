@@ -41,7 +41,9 @@ struct Node {
   // Which child Bisect draws first, decided when the node is made: off the chain from a node
   // to its far child, where the plane test would delay every step (unused at the finest level).
   bool child0_first;
-  int level;
+  uint8_t level;  // at most 3 * 16
+  // Count passes that gather a CountCurve only: the smallest eta code of the node's ancestors.
+  uint32_t eta_cap;
 };
 
 // Everything the traversal reads, fixed for one request.
@@ -190,7 +192,7 @@ inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
     }
     o.g = t.g + w * rt.gradient_update[ch];
     o.cls = rt.child[ch];
-    o.level = t.level + 1;
+    o.level = uint8_t(t.level + 1);
     // The child's first read is its refinement vertex: start fetching it now (the second
     // child has a whole subtree's time to arrive).
     if (o.level < 3 * c.k) {

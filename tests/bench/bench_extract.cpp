@@ -1,6 +1,6 @@
 // Extraction speed: sorted (back-to-front) vs --order none, 1 vs 2 threads, blocks vs node by
-// node for the last three levels, and an extract-then-sort baseline (same traversal unsorted,
-// then std::sort by centroid depth).
+// node for the last three levels, the budget search (first view of a budget), and an
+// extract-then-sort baseline (same traversal unsorted, then std::sort by centroid depth).
 //   build/tests/bench/bench_extract --benchmark_counters_tabular=true
 // Cases: cayley:513 iso 0 and -0.5,0,0.5; buckyball:513 iso .05,.15,.25, each at the eps that
 // gives about 1 M triangles; cayley:257 iso 0 at eps = 0.
@@ -153,6 +153,28 @@ void BM_ExtractThenSort(benchmark::State& state) {
   Report(state, triangles);
 }
 
+// The budget search alone, as the first view of a (volume, isovalues, budget) pays it: the
+// eps for the case's 1 M-triangle budget, found from scratch (no memo) by counting passes.
+// args: case, threads
+void BM_BudgetSearch(benchmark::State& state) {
+  const Scene& scene = GetScene(int(state.range(0)));
+  ExtractRequest r = scene.request;
+  r.threads = int(state.range(1));
+  r.budget = Cases()[size_t(state.range(0))].target_triangles;
+  if (r.budget == 0) r.budget = 500000;  // cayley:257: half its eps 0 frame
+  double eps = 0, passes = 0, triangles = 0;
+  for (auto _ : state) {
+    auto res = Extract(*scene.hierarchy, scene.xf, r);
+    state.SetIterationTime(res->stats.budget_ms / 1e3);  // the search, not the extraction
+    eps = res->stats.eps_used;
+    passes = res->stats.budget_passes;
+    triangles = double(res->stats.triangles);
+  }
+  state.counters["eps"] = eps;
+  state.counters["passes"] = passes;
+  state.counters["triangles"] = triangles;
+}
+
 void Args(benchmark::internal::Benchmark* b) {
   for (int c = 0; c < 4; ++c)
     for (int threads : {1, 2})
@@ -163,6 +185,11 @@ BENCHMARK(BM_ExtractNodeByNode)
     ->DenseRange(0, 3)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
+    ->MinTime(1.0);
+BENCHMARK(BM_BudgetSearch)
+    ->ArgsProduct({{0, 1, 2, 3}, {1, 2}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseManualTime()
     ->MinTime(1.0);
 BENCHMARK(BM_ExtractThenSort)
     ->Args({0, 1})

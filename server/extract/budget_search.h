@@ -1,0 +1,45 @@
+// The search for the smallest eps whose mesh fits a triangle budget, over eta codes
+// (count_curve.h: the count changes only at edges E_k, so the answer is the smallest code k
+// with count(E_k) <= budget, exactly). Private to server/extract; separate from the passes it
+// drives so that its logic can be tested on synthetic count functions.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+
+#include "server/extract/count_curve.h"
+
+namespace isostream::extract_internal {
+
+// The eps of edge `code`: the float with bits code << 16. The +inf edge is reported as the
+// largest float, which stops the same etas (every finite one) and stays finite.
+double EdgeEps(uint32_t code);
+
+// The smallest code whose edge is >= eps (eps >= 0).
+uint32_t CodeAtLeast(double eps);
+
+// One count pass at edge `code`: the triangle count, or any value past the search's limit if
+// the count passes it; when `curve` is given (range [code, curve->last()]) and the count is
+// within the limit, the pass also fills it. nullopt: the pass was stopped (cancelled, or past
+// a deadline); the search then ends at once.
+using CountPass = std::function<std::optional<int64_t>(uint32_t code, CountCurve* curve)>;
+
+struct BudgetSearchResult {
+  uint32_t code = 0;
+  std::optional<int64_t> count;  // at `code`, unless nothing fits (then the coarsest mesh)
+  int passes = 0;
+  bool stopped = false;
+};
+
+// Counts at `top` (the coarsest mesh; nothing fits if it is over budget), then probes below
+// the smallest code known to fit: each pass that completes gathers the count at every code
+// from its own up to that one, so a pass landing between the budget and the limit holds the
+// answer. A pass that fits moves the top down and shows the local slope of log count over
+// log eps, which aims the next pass at twice the budget; a pass past the limit marks a code
+// that does not fit. The first probe aims at a sixteenth of the budget with a steep slope, so
+// it is cheap whatever the volume.
+BudgetSearchResult FindBudgetCode(int64_t budget, int64_t limit, uint32_t top,
+                                  const CountPass& count);
+
+}  // namespace isostream::extract_internal

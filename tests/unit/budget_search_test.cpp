@@ -1,0 +1,196 @@
+// The triangle count as a function of eps from one pass (count_curve.h), and the budget search
+// that reads it (budget_search.h): the curve equals a separate count at every eta code, and
+// the search finds the exact smallest code that fits, on real hierarchies and on synthetic
+// count functions (power laws, plateaus over many octaves, cliffs).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <optional>
+#include <vector>
+
+#include "server/extract/budget_search.h"
+#include "server/extract/extractor.h"
+#include "test_volumes.h"
+
+namespace isostream {
+namespace {
+
+using extract_internal::BudgetSearchResult;
+using extract_internal::CodeAtLeast;
+using extract_internal::CountCurve;
+using extract_internal::EdgeEps;
+using extract_internal::FindBudgetCode;
+using extract_internal::kInfiniteEtaCode;
+using testing::BlobsField;
+using testing::CayleyField;
+using testing::MakeHierarchy;
+
+ExtractRequest Request(std::vector<float> iso) {
+  ExtractRequest r;
+  r.isovalues = std::move(iso);
+  r.view.eye = {40, -13, 57};
+  return r;
+}
+
+TEST(EtaCodes, EdgesAndCodesRoundTrip) {
+  EXPECT_EQ(EdgeEps(0), 0.0);
+  EXPECT_EQ(CodeAtLeast(0.0), 0u);
+  EXPECT_EQ(CodeAtLeast(1.0), 0x3f80u);
+  EXPECT_EQ(EdgeEps(0x3f80), 1.0);
+  EXPECT_EQ(CodeAtLeast(std::nextafter(1.0, 2.0)), 0x3f81u);  // the next edge up
+  EXPECT_EQ(CodeAtLeast(1e300), kInfiniteEtaCode);
+  EXPECT_EQ(EdgeEps(kInfiniteEtaCode), double(std::numeric_limits<float>::max()));
+  for (uint32_t code : {1u, 0x100u, 0x3a12u, 0x7f7fu}) {
+    EXPECT_EQ(CodeAtLeast(EdgeEps(code)), code);
+    EXPECT_EQ(CodeAtLeast(EdgeEps(code) * (1 - 1e-9)), code);
+    EXPECT_EQ(CodeAtLeast(EdgeEps(code) * (1 + 1e-9)), code + 1);
+  }
+}
+
+TEST(CountCurve, SumsIntervalsClippedToItsRange) {
+  CountCurve curve(10, 20);
+  curve.Add(0, 12, 5);       // clipped to [10, 12]
+  curve.Add(15, 15, 7);      // one code
+  curve.Add(18, 100, 1);     // clipped to [18, 20]
+  curve.Add(21, 30, 1000);   // outside
+  curve.Add(14, 13, 1000);   // empty
+  const std::vector<int64_t> want = {5, 5, 5, 0, 0, 7, 0, 0, 1, 1, 1};
+  EXPECT_EQ(curve.Counts(), want);
+}
+
+// One pass's curve equals a separate count at each code it covers (blocks on, for the counts:
+// the curve's node-by-node pass agrees with them), on several surfaces at once too.
+TEST(CountCurve, EqualsACountAtEveryCode) {
+  const auto h = MakeHierarchy(5, BlobsField);
+  for (const std::vector<float>& iso : {std::vector<float>{0.5f}, {0.2f, 0.5f, 0.8f}}) {
+    const ExtractRequest r = Request(iso);
+    const int half = (h->n() - 1) / 2;
+    const uint32_t top = CodeAtLeast(h->eta(half, half, half)) + 1;
+    for (uint32_t first : {0u, CodeAtLeast(1e-3), CodeAtLeast(0.05)}) {
+      auto curve = CountTrianglesPerEtaCode(*h, GridToWorld{}, r, first, top);
+      ASSERT_TRUE(curve.ok()) << curve.status();
+      ASSERT_EQ(curve->size(), size_t(top - first + 1));
+      int changes = 0;
+      for (uint32_t code = first; code <= top; ++code) {
+        changes += code > first && (*curve)[code - first] != (*curve)[code - first - 1];
+        // From eps 0, every code below 1e-3 (sub-voxel etas, ~8000 codes) would take seconds:
+        // the lowest 256 and every 17th.
+        if (first == 0 && code > 256 && code < CodeAtLeast(1e-3) && code % 17 != 0) continue;
+        auto direct = CountTriangles(*h, GridToWorld{}, r, EdgeEps(code));
+        ASSERT_TRUE(direct.ok());
+        ASSERT_EQ((*curve)[code - first], *direct) << "code " << code << " first " << first;
+      }
+      EXPECT_GT(changes, 10) << "the curve should step many times over this range";
+      // Between two codes the count is that of the upper one (a node stops where eta < eps).
+      const uint32_t mid = first + (top - first) / 2;
+      auto between = CountTriangles(*h, GridToWorld{}, r, 0.5 * (EdgeEps(mid) + EdgeEps(mid + 1)));
+      ASSERT_TRUE(between.ok());
+      EXPECT_EQ(*between, (*curve)[mid + 1 - first]);
+    }
+  }
+  EXPECT_FALSE(CountTrianglesPerEtaCode(*h, GridToWorld{}, Request({0.5f}), 10, 9).ok());
+  EXPECT_FALSE(CountTrianglesPerEtaCode(*h, GridToWorld{}, Request({0.5f}), 0, 0x7f81).ok());
+}
+
+// The budget's eps is exact: its code fits, the code below does not.
+TEST(BudgetSearch, FindsTheExactSmallestCodeOnAHierarchy) {
+  const auto h = MakeHierarchy(5, CayleyField);
+  const int64_t full = *CountTriangles(*h, GridToWorld{}, Request({0.0f, 0.3f}), 0.0);
+  for (int64_t budget : {int64_t{40}, int64_t{300}, int64_t{2500}, int64_t{9000}, full - 1, full}) {
+    ExtractRequest r = Request({0.0f, 0.3f});
+    r.budget = budget;
+    auto res = Extract(*h, GridToWorld{}, r);
+    ASSERT_TRUE(res.ok()) << res.status();
+    const double eps = res->stats.eps_used;
+    EXPECT_LE(res->stats.triangles, budget) << budget;
+    EXPECT_LE(res->stats.budget_passes, 12) << budget;
+    const uint32_t code = CodeAtLeast(eps);
+    ASSERT_EQ(EdgeEps(code), eps) << "the answer is an eta code's edge";
+    if (code > 0) {
+      auto below = CountTriangles(*h, GridToWorld{}, r, EdgeEps(code - 1));
+      ASSERT_TRUE(below.ok());
+      EXPECT_GT(*below, budget) << "eps " << EdgeEps(code - 1) << " fits too, budget " << budget;
+    }
+  }
+}
+
+// A synthetic count function of the code, served to the search as passes would: the count at
+// the pass's code (or past the limit), and the curve up to its end.
+BudgetSearchResult Search(const std::function<int64_t(uint32_t)>& count_at, int64_t budget,
+                          uint32_t top) {
+  const int64_t limit = 4 * budget;
+  return FindBudgetCode(budget, limit, top,
+                        [&](uint32_t code, CountCurve* curve) -> std::optional<int64_t> {
+                          const int64_t n = count_at(code);
+                          if (n > limit) return limit + 1;
+                          if (!curve) return n;
+                          for (uint32_t k = curve->first(); k <= curve->last(); ++k)
+                            curve->Add(k, k, count_at(k));
+                          // Where the count first changes below `code` (a pass knows it from
+                          // the etas of the nodes that stopped).
+                          for (uint32_t k = code; k > 0; --k)
+                            if (count_at(k - 1) != n) {
+                              curve->NoteStop(k - 1);
+                              break;
+                            }
+                          return n;
+                        });
+}
+
+uint32_t BruteForce(const std::function<int64_t(uint32_t)>& count_at, int64_t budget,
+                    uint32_t top) {
+  for (uint32_t k = 0; k <= top; ++k)
+    if (count_at(k) <= budget) return k;
+  return top;
+}
+
+TEST(BudgetSearch, FindsTheExactCodeOnSyntheticCounts) {
+  const uint32_t top = 0x4000;  // eps 2
+  std::vector<std::pair<const char*, std::function<int64_t(uint32_t)>>> shapes = {
+      {"1/eps", [](uint32_t k) { return int64_t(50 + 1e3 / std::max(EdgeEps(k), 1e-12)); }},
+      {"1/eps^2.5",
+       [](uint32_t k) {
+         return int64_t(std::min(8 + 1e2 / std::pow(EdgeEps(k), 2.5), 1e15));  // inf at 0: 1e15
+       }},
+      // Flat over 60 octaves, then a cliff: the search must stride over the plateau.
+      {"plateau", [](uint32_t k) { return k >= 0x2000 ? int64_t(30) : int64_t(5'000'000); }},
+      // Steps: whole regions stop at once.
+      {"steps", [](uint32_t k) { return int64_t(1) << std::clamp(int(0x4000 - k) / 300, 0, 40); }},
+  };
+  for (const auto& [name, f] : shapes)
+    for (int64_t budget : {int64_t{60}, int64_t{1000}, int64_t{123456}, int64_t{4'000'000}}) {
+      const BudgetSearchResult res = Search(f, budget, top);
+      const uint32_t want = BruteForce(f, budget, top);
+      EXPECT_EQ(res.code, want) << name << " budget " << budget;
+      if (f(want) <= budget) {
+        ASSERT_TRUE(res.count.has_value()) << name;
+        EXPECT_EQ(*res.count, f(want)) << name;
+      }
+      EXPECT_LE(res.passes, 12) << name << " budget " << budget;
+      EXPECT_FALSE(res.stopped);
+    }
+}
+
+TEST(BudgetSearch, NothingFitsEverythingFitsAndAStoppedPass) {
+  auto grows = [](uint32_t k) { return int64_t(0x5000 - k); };
+  BudgetSearchResult none = Search(grows, 10, 0x4000);  // 4096 at the top: over budget
+  EXPECT_EQ(none.code, 0x4000u);
+  EXPECT_EQ(none.passes, 1);
+  EXPECT_FALSE(none.count.has_value());
+  BudgetSearchResult all = Search(grows, 1 << 20, 0x4000);  // even code 0 fits
+  EXPECT_EQ(all.code, 0u);
+  EXPECT_EQ(*all.count, 0x5000);
+  int passes = 0;
+  const BudgetSearchResult stopped = FindBudgetCode(
+      1000, 4000, 0x4000, [&](uint32_t code, CountCurve* curve) -> std::optional<int64_t> {
+        if (curve) curve->NoteStop(code - 1);  // the count may change right below
+        return ++passes < 2 ? std::optional<int64_t>(10) : std::nullopt;
+      });
+  EXPECT_TRUE(stopped.stopped);
+  EXPECT_EQ(stopped.passes, 2);
+}
+
+}  // namespace
+}  // namespace isostream
