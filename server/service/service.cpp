@@ -1,5 +1,6 @@
 #include "server/service/service.h"
 
+#include <grpcpp/impl/codegen/proto_utils.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -9,6 +10,7 @@
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <type_traits>
 
 #include "server/service/catalogue.h"
 #include "server/service/frame_producer.h"
@@ -205,7 +207,7 @@ class ChunkStream : public Reactor, public StreamBase {
       queue_.push_back(std::move(chunk));
       start = TakeNextWriteLocked();
     }
-    if (start) this->StartWrite(&writing_);
+    if (start) StartChunkWrite();
     return true;
   }
 
@@ -232,7 +234,7 @@ class ChunkStream : public Reactor, public StreamBase {
       CompleteIfIdleLocked();
       finish = TakeFinishLocked();
     }
-    if (start) this->StartWrite(&writing_);
+    if (start) StartChunkWrite();
     if (finish) this->Finish(*finish);
   }
 
@@ -409,6 +411,24 @@ class ChunkStream : public Reactor, public StreamBase {
     return finish_status_;
   }
 
+  // Writes writing_ (gRPC reads it, or its bytes, until OnWriteDone). A reactor that writes
+  // bytes (Session) gets the chunk serialized here.
+  void StartChunkWrite() {
+    if constexpr (std::is_base_of_v<grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>,
+                                    Reactor>) {
+      bool own = false;
+      writing_bytes_.Clear();  // the writer wants an empty buffer; the last write is done
+      const grpc::Status s =
+          grpc::SerializationTraits<pb::FrameChunk>::Serialize(writing_, &writing_bytes_, &own);
+      // Only a message past 2 GB fails (chunks are a few MB): the client then sees bytes that
+      // do not parse, not a stream that stops.
+      if (!s.ok()) spdlog::error("{}: cannot serialize a chunk: {}", peer_, s.error_message());
+      this->StartWrite(&writing_bytes_);
+    } else {
+      this->StartWrite(&writing_);
+    }
+  }
+
   bool TakeNextWriteLocked() {
     if (write_in_flight_ || queue_.empty() || finishing_) return false;
     writing_ = std::move(queue_.front());
@@ -437,6 +457,7 @@ class ChunkStream : public Reactor, public StreamBase {
   mutable std::mutex mu_;
   std::deque<pb::FrameChunk> queue_;
   pb::FrameChunk writing_;  // the message in flight; gRPC reads it until OnWriteDone
+  grpc::ByteBuffer writing_bytes_;  // its bytes, for a reactor that writes bytes
   bool write_in_flight_ = false;
   uint64_t generation_ = 0;
   std::shared_ptr<std::atomic<bool>> cancel_ = std::make_shared<std::atomic<bool>>(false);
@@ -480,7 +501,7 @@ class ExtractStream final : public ChunkStream<grpc::ServerWriteReactor<pb::Fram
 
 // Session: views in, frames out, latest view wins.
 class SessionStream final
-    : public ChunkStream<grpc::ServerBidiReactor<pb::ViewRequest, pb::FrameChunk>> {
+    : public ChunkStream<grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>> {
  public:
   SessionStream(ServiceCore* core, grpc::CallbackServerContext* context)
       : ChunkStream(core, context) {}
@@ -497,7 +518,7 @@ class SessionStream final
       last_activity_ = Clock::now();
     }
     spdlog::debug("{}: session opened", peer_);
-    StartRead(&incoming_);
+    StartRead(&incoming_bytes_);
   }
 
   void OnReadDone(bool ok) override {
@@ -509,8 +530,13 @@ class SessionStream final
       CompleteIfIdleLocked();
       finish = TakeFinishLocked();
     } else {
+      incoming_.Clear();
+      const grpc::Status parsed =
+          grpc::SerializationTraits<pb::ViewRequest>::Deserialize(&incoming_bytes_, &incoming_);
       absl::StatusOr<ExtractRequest> request =
-          ToExtractRequest(incoming_, core_->config.limits, core_->config.threads);
+          parsed.ok() ? ToExtractRequest(incoming_, core_->config.limits, core_->config.threads)
+                      : absl::InvalidArgumentError(
+                            "the session's request is not an isostream.v1.ViewRequest");
       if (request.ok()) {
         const absl::Status known = core_->catalogue.Check(incoming_.volume());
         if (!known.ok()) request = known;
@@ -527,13 +553,14 @@ class SessionStream final
         }
         finish = TakeFinishLocked();
       }
-      if (read_more) StartRead(&incoming_);
+      if (read_more) StartRead(&incoming_bytes_);
       if (submit) SubmitJob();
     }
     if (finish) Finish(*finish);
   }
 
  private:
+  grpc::ByteBuffer incoming_bytes_;
   pb::ViewRequest incoming_;
 };
 
@@ -646,7 +673,7 @@ grpc::ServerWriteReactor<pb::FrameChunk>* IsostreamService::Extract(
   return s;
 }
 
-grpc::ServerBidiReactor<pb::ViewRequest, pb::FrameChunk>* IsostreamService::Session(
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* IsostreamService::Session(
     grpc::CallbackServerContext* context) {
   auto* s = SessionStream::Create<SessionStream>(core_.get(), context);
   s->Start();

@@ -15,7 +15,18 @@ namespace isostream::service {
 
 struct ServiceCore;
 
-class IsostreamService final : public ::isostream::v1::Isostream::CallbackService {
+namespace internal {
+namespace pbv1 = ::isostream::v1;
+// The callback service, except Session, whose requests arrive as bytes: the service parses
+// them itself, so a request that is not a ViewRequest is INVALID_ARGUMENT (gRPC would report a
+// failed parse on a stream as the client's half-close, ending it with OK and no frame).
+using ServiceBase = pbv1::Isostream::WithCallbackMethod_ListVolumes<
+    pbv1::Isostream::WithCallbackMethod_GetVolumeInfo<pbv1::Isostream::WithCallbackMethod_Extract<
+        pbv1::Isostream::WithRawCallbackMethod_Session<
+            pbv1::Isostream::WithCallbackMethod_GetServerStats<pbv1::Isostream::Service>>>>>;
+}  // namespace internal
+
+class IsostreamService final : public internal::ServiceBase {
  public:
   explicit IsostreamService(const DaemonConfig& config);
   ~IsostreamService() override;  // waits for worker jobs; call after the server has shut down
@@ -31,7 +42,8 @@ class IsostreamService final : public ::isostream::v1::Isostream::CallbackServic
                                            ::isostream::v1::ServerStats* response) override;
   grpc::ServerWriteReactor<::isostream::v1::FrameChunk>* Extract(
       grpc::CallbackServerContext* context, const ::isostream::v1::ViewRequest* request) override;
-  grpc::ServerBidiReactor<::isostream::v1::ViewRequest, ::isostream::v1::FrameChunk>* Session(
+  // ViewRequests in, FrameChunks out, as bytes (see ServiceBase).
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Session(
       grpc::CallbackServerContext* context) override;
 
   // Graceful stop, step one: new streams get UNAVAILABLE; open streams finish once the frame in

@@ -1,6 +1,7 @@
 // Integration tests: a real isostreamd process on 127.0.0.1, driven through the client library
 // and the `isostream fetch` CLI. Volumes are small generators (buckyball:65/129) so the suite
 // runs in well under a minute on two cores; every wait is bounded.
+#include <grpcpp/generic/generic_stub.h>
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -403,6 +404,44 @@ TEST_F(Daemon, MalformedRequestsNeverTakeItDown) {
   auto health = c->CheckHealth();
   ASSERT_TRUE(health.ok()) << health.status();
   EXPECT_TRUE(*health);
+}
+
+// Bytes that are not a ViewRequest (a field claiming 16 bytes with 3 behind it) on a Session:
+// INVALID_ARGUMENT, not the OK-and-no-frame of a client that closed without asking. Sent with
+// gRPC's generic stub, since a typed client cannot send them.
+TEST_F(Daemon, SessionBytesThatAreNotAViewRequestAreInvalidArgument) {
+  auto channel = grpc::CreateChannel(daemon_->address(), grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  grpc::CompletionQueue cq;
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  auto call = stub.PrepareCall(&context, "/isostream.v1.Isostream/Session", &cq);
+  // Each step waits for its own completion (tags are the step numbers).
+  auto step = [&](intptr_t tag) {
+    void* got = nullptr;
+    bool ok = false;
+    EXPECT_TRUE(cq.Next(&got, &ok));
+    EXPECT_EQ(got, reinterpret_cast<void*>(tag));
+    return ok;
+  };
+  call->StartCall(reinterpret_cast<void*>(1));
+  ASSERT_TRUE(step(1));
+  grpc::Slice garbage(std::string("\x0a\x10" "abc", 5));
+  call->Write(grpc::ByteBuffer(&garbage, 1), reinterpret_cast<void*>(2));
+  step(2);  // may fail if the server already finished: the status below says why
+  grpc::ByteBuffer reply;
+  call->Read(&reply, reinterpret_cast<void*>(3));
+  EXPECT_FALSE(step(3)) << "no chunk for a request that does not parse";
+  grpc::Status status;
+  call->Finish(&status, reinterpret_cast<void*>(4));
+  ASSERT_TRUE(step(4));
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
+  EXPECT_NE(status.error_message().find("ViewRequest"), std::string::npos);
+  cq.Shutdown();
+  void* ignored;
+  bool ok;
+  while (cq.Next(&ignored, &ok)) {
+  }
 }
 
 TEST_F(Daemon, StillServesAfterEverything) {
