@@ -108,6 +108,15 @@ TEST(BudgetSearch, FindsTheExactSmallestCodeOnAHierarchy) {
     EXPECT_LE(res->stats.budget_passes, 12) << budget;
     const uint32_t code = CodeAtLeast(eps);
     ASSERT_EQ(EdgeEps(code), eps) << "the answer is an eta code's edge";
+    // Passes are deterministic, so the search is too, whatever the thread count.
+    for (int threads : {1, 2}) {
+      ExtractRequest t = r;
+      t.threads = threads;
+      auto again = Extract(*h, GridToWorld{}, t);
+      ASSERT_TRUE(again.ok());
+      EXPECT_EQ(again->stats.eps_used, eps) << threads << " threads";
+      EXPECT_EQ(again->stats.budget_passes, res->stats.budget_passes);
+    }
     if (code > 0) {
       auto below = CountTriangles(*h, GridToWorld{}, r, EdgeEps(code - 1));
       ASSERT_TRUE(below.ok());
