@@ -65,7 +65,7 @@ class Traverser {
           }
           Bisect(c_, *cur, spare, &stack[top++]);
           if (!kEmit && curve_) {
-            // A leaf for the edges above its own eta, up to where an ancestor stops first.
+            // A leaf at the eta codes above its own, up to its nearest ancestor's.
             const uint32_t code = EtaCode(c_, *cur);
             curve_->Add(code + 1, cur->eta_cap, LeafTriangles(c_, *cur));
             spare->eta_cap = stack[top - 1].eta_cap = std::min(cur->eta_cap, code);
@@ -75,7 +75,7 @@ class Traverser {
         case Decision::kLeaf: {
           const int n = emit_.Leaf(*cur, first, last);
           triangles += n;
-          // Its eta (if any) is below this pass's eps: a leaf at every edge the curve holds.
+          // Its eta (if any) is below this pass's eps: a leaf at every code the curve holds.
           if (!kEmit && curve_) {
             curve_->Add(0, cur->eta_cap, n);
             if (cur->level < 3 * c_.k) curve_->NoteStop(EtaCode(c_, *cur));
