@@ -175,6 +175,19 @@ void ServiceCore::StopIdleReaper() {
   if (idle_reaper.joinable()) idle_reaper.join();
 }
 
+// Requests arrive as bytes (service.h, ServiceBase): parsed here, so one that does not parse
+// gets a clear INVALID_ARGUMENT.
+template <class Message>
+bool Parse(const grpc::ByteBuffer& bytes, Message* message) {
+  grpc::ByteBuffer copy(bytes);  // shares the slices; Deserialize consumes its buffer
+  message->Clear();
+  return grpc::SerializationTraits<Message>::Deserialize(&copy, message).ok();
+}
+
+absl::Status NotA(const std::string& type) {
+  return absl::InvalidArgumentError("the request is not an " + type);
+}
+
 // A stream of frame chunks: the write queue (one write in flight), the latest-view-wins frame
 // job, and finishing exactly once after the last write. Reactor is ServerWriteReactor (Extract)
 // or ServerBidiReactor (Session); both have the same write and finish calls.
@@ -412,10 +425,11 @@ class ChunkStream : public Reactor, public StreamBase {
   }
 
   // Writes writing_ (gRPC reads it, or its bytes, until OnWriteDone). A reactor that writes
-  // bytes (Session) gets the chunk serialized here.
+  // bytes gets the chunk serialized here.
   void StartChunkWrite() {
     if constexpr (std::is_base_of_v<grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>,
-                                    Reactor>) {
+                                    Reactor> ||
+                  std::is_base_of_v<grpc::ServerWriteReactor<grpc::ByteBuffer>, Reactor>) {
       bool own = false;
       writing_bytes_.Clear();  // the writer wants an empty buffer; the last write is done
       const grpc::Status s =
@@ -474,14 +488,16 @@ class ChunkStream : public Reactor, public StreamBase {
 };
 
 // Extract: one request, its frame(s), then OK.
-class ExtractStream final : public ChunkStream<grpc::ServerWriteReactor<pb::FrameChunk>> {
+class ExtractStream final : public ChunkStream<grpc::ServerWriteReactor<grpc::ByteBuffer>> {
  public:
   ExtractStream(ServiceCore* core, grpc::CallbackServerContext* context)
       : ChunkStream(core, context) {}
 
-  void Start(const pb::ViewRequest& view) {
+  void Start(const grpc::ByteBuffer& bytes) {
     if (!core_->Authorized(context_))
       return Reject(absl::UnauthenticatedError("missing or wrong bearer token"));
+    pb::ViewRequest view;
+    if (!Parse(bytes, &view)) return Reject(NotA("isostream.v1.ViewRequest"));
     auto request = ToExtractRequest(view, core_->config.limits, core_->config.threads);
     if (!request.ok()) return Reject(request.status());
     const absl::Status known = core_->catalogue.Check(view.volume());
@@ -530,13 +546,11 @@ class SessionStream final
       CompleteIfIdleLocked();
       finish = TakeFinishLocked();
     } else {
-      incoming_.Clear();
-      const grpc::Status parsed =
-          grpc::SerializationTraits<pb::ViewRequest>::Deserialize(&incoming_bytes_, &incoming_);
+      const bool parsed = Parse(incoming_bytes_, &incoming_);
+      incoming_bytes_.Clear();
       absl::StatusOr<ExtractRequest> request =
-          parsed.ok() ? ToExtractRequest(incoming_, core_->config.limits, core_->config.threads)
-                      : absl::InvalidArgumentError(
-                            "the session's request is not an isostream.v1.ViewRequest");
+          parsed ? ToExtractRequest(incoming_, core_->config.limits, core_->config.threads)
+                 : NotA("isostream.v1.ViewRequest");
       if (request.ok()) {
         const absl::Status known = core_->catalogue.Check(incoming_.volume());
         if (!known.ok()) request = known;
@@ -592,13 +606,19 @@ grpc::ServerUnaryReactor* IsostreamService::ListVolumes(grpc::CallbackServerCont
 }
 
 grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerContext* context,
-                                                          const pb::GetVolumeInfoRequest* request,
-                                                          pb::VolumeInfo* response) {
+                                                          const grpc::ByteBuffer* request_bytes,
+                                                          grpc::ByteBuffer* response_bytes) {
   auto* reactor = context->DefaultReactor();
   if (!core_->Authorized(context)) {
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
     return reactor;
   }
+  pb::GetVolumeInfoRequest parsed;
+  if (!Parse(*request_bytes, &parsed)) {
+    reactor->Finish(ToGrpc(NotA("isostream.v1.GetVolumeInfoRequest")));
+    return reactor;
+  }
+  const pb::GetVolumeInfoRequest* request = &parsed;
   const int bins = request->histogram_bins() == 0 ? 64 : request->histogram_bins();
   absl::Status known = core_->catalogue.Check(request->name());
   if (known.ok() && (bins < 1 || bins > 4096))
@@ -613,9 +633,15 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
   }
   ServiceCore* core = core_.get();
   const std::string name = request->name();
-  core_->frames->Submit([core, name, bins, reactor, response, context] {
+  core_->frames->Submit([core, name, bins, reactor, response_bytes, context] {
+    pb::VolumeInfo info;
+    pb::VolumeInfo* response = &info;
     const auto finish = [&](const grpc::Status& status) {
       core->ReleaseSlot();
+      bool own = false;
+      if (status.ok() &&
+          !grpc::SerializationTraits<pb::VolumeInfo>::Serialize(info, response_bytes, &own).ok())
+        return reactor->Finish(grpc::Status(grpc::StatusCode::INTERNAL, "cannot serialize"));
       reactor->Finish(status);
     };
     const grpc::Status gone(grpc::StatusCode::CANCELLED, "cancelled by the client");
@@ -666,8 +692,8 @@ grpc::ServerUnaryReactor* IsostreamService::GetServerStats(grpc::CallbackServerC
   return reactor;
 }
 
-grpc::ServerWriteReactor<pb::FrameChunk>* IsostreamService::Extract(
-    grpc::CallbackServerContext* context, const pb::ViewRequest* request) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* IsostreamService::Extract(
+    grpc::CallbackServerContext* context, const grpc::ByteBuffer* request) {
   auto* s = ExtractStream::Create<ExtractStream>(core_.get(), context);
   s->Start(*request);
   return s;

@@ -17,12 +17,13 @@ struct ServiceCore;
 
 namespace internal {
 namespace pbv1 = ::isostream::v1;
-// The callback service, except Session, whose requests arrive as bytes: the service parses
-// them itself, so a request that is not a ViewRequest is INVALID_ARGUMENT (gRPC would report a
-// failed parse on a stream as the client's half-close, ending it with OK and no frame).
+// The callback service, with the calls that carry a request (GetVolumeInfo, Extract, Session)
+// taking it as bytes: the service parses them itself, so a request that does not parse is
+// INVALID_ARGUMENT. (gRPC reports a failed parse on a stream as the client's half-close, which
+// ended a session with OK and no frame, and answers the others UNIMPLEMENTED with no message.)
 using ServiceBase = pbv1::Isostream::WithCallbackMethod_ListVolumes<
-    pbv1::Isostream::WithCallbackMethod_GetVolumeInfo<pbv1::Isostream::WithCallbackMethod_Extract<
-        pbv1::Isostream::WithRawCallbackMethod_Session<
+    pbv1::Isostream::WithRawCallbackMethod_GetVolumeInfo<
+        pbv1::Isostream::WithRawCallbackMethod_Extract<pbv1::Isostream::WithRawCallbackMethod_Session<
             pbv1::Isostream::WithCallbackMethod_GetServerStats<pbv1::Isostream::Service>>>>>;
 }  // namespace internal
 
@@ -34,14 +35,16 @@ class IsostreamService final : public internal::ServiceBase {
   grpc::ServerUnaryReactor* ListVolumes(grpc::CallbackServerContext* context,
                                         const ::isostream::v1::ListVolumesRequest* request,
                                         ::isostream::v1::ListVolumesResponse* response) override;
+  // A GetVolumeInfoRequest in, a VolumeInfo out, as bytes (see ServiceBase).
   grpc::ServerUnaryReactor* GetVolumeInfo(grpc::CallbackServerContext* context,
-                                          const ::isostream::v1::GetVolumeInfoRequest* request,
-                                          ::isostream::v1::VolumeInfo* response) override;
+                                          const grpc::ByteBuffer* request,
+                                          grpc::ByteBuffer* response) override;
   grpc::ServerUnaryReactor* GetServerStats(grpc::CallbackServerContext* context,
                                            const ::isostream::v1::GetServerStatsRequest* request,
                                            ::isostream::v1::ServerStats* response) override;
-  grpc::ServerWriteReactor<::isostream::v1::FrameChunk>* Extract(
-      grpc::CallbackServerContext* context, const ::isostream::v1::ViewRequest* request) override;
+  // A ViewRequest in, FrameChunks out, as bytes (see ServiceBase).
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* Extract(grpc::CallbackServerContext* context,
+                                                      const grpc::ByteBuffer* request) override;
   // ViewRequests in, FrameChunks out, as bytes (see ServiceBase).
   grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Session(
       grpc::CallbackServerContext* context) override;

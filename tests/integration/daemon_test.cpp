@@ -406,42 +406,78 @@ TEST_F(Daemon, MalformedRequestsNeverTakeItDown) {
   EXPECT_TRUE(*health);
 }
 
-// Bytes that are not a ViewRequest (a field claiming 16 bytes with 3 behind it) on a Session:
-// INVALID_ARGUMENT, not the OK-and-no-frame of a client that closed without asking. Sent with
-// gRPC's generic stub, since a typed client cannot send them.
-TEST_F(Daemon, SessionBytesThatAreNotAViewRequestAreInvalidArgument) {
-  auto channel = grpc::CreateChannel(daemon_->address(), grpc::InsecureChannelCredentials());
+// Sends `bytes` as the request of `method` with gRPC's generic stub (a typed client cannot
+// send bytes that do not parse), reads whatever comes back, and returns the call's status and
+// how many messages arrived.
+std::pair<grpc::Status, int> RawCall(const std::string& address, const std::string& method,
+                                     const std::string& bytes) {
+  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
   grpc::GenericStub stub(channel);
   grpc::CompletionQueue cq;
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-  auto call = stub.PrepareCall(&context, "/isostream.v1.Isostream/Session", &cq);
-  // Each step waits for its own completion (tags are the step numbers).
-  auto step = [&](intptr_t tag) {
+  auto call = stub.PrepareCall(&context, method, &cq);
+  // Each step waits for its own completion (tags are step numbers).
+  intptr_t next = 0;
+  auto step = [&]() {
     void* got = nullptr;
     bool ok = false;
     EXPECT_TRUE(cq.Next(&got, &ok));
-    EXPECT_EQ(got, reinterpret_cast<void*>(tag));
+    EXPECT_EQ(got, reinterpret_cast<void*>(next));
     return ok;
   };
-  call->StartCall(reinterpret_cast<void*>(1));
-  ASSERT_TRUE(step(1));
-  grpc::Slice garbage(std::string("\x0a\x10" "abc", 5));
-  call->Write(grpc::ByteBuffer(&garbage, 1), reinterpret_cast<void*>(2));
-  step(2);  // may fail if the server already finished: the status below says why
-  grpc::ByteBuffer reply;
-  call->Read(&reply, reinterpret_cast<void*>(3));
-  EXPECT_FALSE(step(3)) << "no chunk for a request that does not parse";
+  auto tag = [&] { return reinterpret_cast<void*>(++next); };
+  call->StartCall(tag());
+  step();
+  grpc::Slice slice(bytes);
+  call->WriteLast(grpc::ByteBuffer(&slice, 1), grpc::WriteOptions(), tag());
+  step();  // may fail if the server already finished: the status says why
+  int messages = 0;
+  for (;;) {
+    grpc::ByteBuffer reply;
+    call->Read(&reply, tag());
+    if (!step()) break;
+    ++messages;
+  }
   grpc::Status status;
-  call->Finish(&status, reinterpret_cast<void*>(4));
-  ASSERT_TRUE(step(4));
-  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
-  EXPECT_NE(status.error_message().find("ViewRequest"), std::string::npos);
+  call->Finish(&status, tag());
+  step();
   cq.Shutdown();
   void* ignored;
   bool ok;
   while (cq.Next(&ignored, &ok)) {
   }
+  return {status, messages};
+}
+
+// Bytes that are not the method's request (a field claiming 16 bytes with 3 behind it):
+// INVALID_ARGUMENT naming the type expected, no message back. gRPC itself would end a Session
+// with OK and no frame (it takes the failed parse for the client's half-close) and answer the
+// others UNIMPLEMENTED with no message.
+TEST_F(Daemon, RequestBytesThatDoNotParseAreInvalidArgument) {
+  const std::string garbage("\x0a\x10" "abc", 5);
+  for (const auto& [method, type] : std::vector<std::pair<std::string, std::string>>{
+           {"/isostream.v1.Isostream/Session", "ViewRequest"},
+           {"/isostream.v1.Isostream/Extract", "ViewRequest"},
+           {"/isostream.v1.Isostream/GetVolumeInfo", "GetVolumeInfoRequest"}}) {
+    const auto [status, messages] = RawCall(daemon_->address(), method, garbage);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << method << ": " << status.error_message();
+    EXPECT_NE(status.error_message().find(type), std::string::npos) << status.error_message();
+    EXPECT_EQ(messages, 0) << method;
+  }
+  // The same path with bytes that parse: a frame's chunks come back, and a volume's info.
+  pb::ViewRequest view = MakeView("buckyball:65", 5, 0.05, glm::dvec3(2, 2, 2));
+  const auto [extracted, chunks] =
+      RawCall(daemon_->address(), "/isostream.v1.Isostream/Extract", view.SerializeAsString());
+  EXPECT_TRUE(extracted.ok()) << extracted.error_message();
+  EXPECT_GT(chunks, 0);
+  pb::GetVolumeInfoRequest info;
+  info.set_name("buckyball:65");
+  const auto [described, answers] = RawCall(
+      daemon_->address(), "/isostream.v1.Isostream/GetVolumeInfo", info.SerializeAsString());
+  EXPECT_TRUE(described.ok()) << described.error_message();
+  EXPECT_EQ(answers, 1);
 }
 
 TEST_F(Daemon, StillServesAfterEverything) {
