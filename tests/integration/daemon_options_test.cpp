@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <fstream>
+#include <iterator>
 #include <thread>
 
 #include "tests/integration/daemon_fixture.h"
@@ -290,6 +291,52 @@ TEST_F(IdleDaemon, AFrameInFlightIsNotIdle) {
   // Then it is idle: ended within bounded time.
   const absl::Status status = (*session)->Finish();
   EXPECT_EQ(status.code(), absl::StatusCode::kDeadlineExceeded) << status;
+}
+
+// --max-sessions 1: a request's slot lasts until its job has ended, not only until its client
+// has gone, so clients that leave cannot keep more jobs running than there are slots. A volume
+// that takes about a second to prepare (cayley:513, no cache) keeps the job of a session
+// cancelled meanwhile running: until it ends, another call is refused.
+class OneSlotDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start({"--max-sessions", "1", "--no-cache", "--max-dim", "513"},
+                               scratch_->path() + "/isostreamd.log"));
+  }
+  static bool Prepared(const std::string& name) {
+    std::ifstream log(scratch_->path() + "/isostreamd.log");
+    const std::string text((std::istreambuf_iterator<char>(log)),
+                           std::istreambuf_iterator<char>());
+    return text.find("prepared volume '" + name + "'") != std::string::npos;
+  }
+};
+
+TEST_F(OneSlotDaemon, ACancelledJobHoldsItsSlotUntilItEnds) {
+  auto c = Connect();
+  {
+    auto session = c->OpenSession();
+    ASSERT_TRUE(session.ok());
+    ASSERT_TRUE((*session)->Send(MakeView("cayley:513", 1, 0.01, glm::dvec3(3, 2, 4))).ok());
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    (*session)->Cancel();  // the client is gone; its job is still preparing the volume
+  }
+  if (Prepared("cayley:513"))
+    GTEST_SKIP() << "cayley:513 was prepared within 150 ms: nothing left to test";
+  // Refused while that job runs; the first call that gets through comes after it ended.
+  int refused = 0;
+  absl::Status last;
+  for (int i = 0; i < 300; ++i) {
+    last = c->GetVolumeInfo("sphere:17").status();
+    if (last.ok()) break;
+    EXPECT_EQ(last.code(), absl::StatusCode::kResourceExhausted) << last;
+    ++refused;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(last.ok()) << last;
+  EXPECT_TRUE(Prepared("cayley:513")) << "a call got the slot while the cancelled job ran";
+  EXPECT_GT(refused, 0);
 }
 
 class TlsDaemon : public Daemon {};
