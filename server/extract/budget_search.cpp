@@ -2,9 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <vector>
+
+#include "server/hierarchy/hierarchy.h"
 
 namespace isostream::extract_internal {
 
@@ -26,10 +27,7 @@ double LogCount(int64_t n) { return std::log(double(std::max<int64_t>(n, 1))); }
 
 double EdgeEps(uint32_t code) {
   if (code >= kInfiniteEtaCode) return double(std::numeric_limits<float>::max());
-  const uint32_t bits = code << 16;
-  float eps;
-  std::memcpy(&eps, &bits, sizeof(eps));
-  return eps;
+  return DecodeEta(uint16_t(code));
 }
 
 uint32_t CodeAtLeast(double eps) {
@@ -37,10 +35,7 @@ uint32_t CodeAtLeast(double eps) {
   if (eps > double(std::numeric_limits<float>::max())) return kInfiniteEtaCode;
   float f = float(eps);
   if (double(f) < eps) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  uint32_t bits;
-  std::memcpy(&bits, &f, sizeof(bits));
-  const uint32_t code = (bits >> 16) + ((bits & 0xffffu) != 0 ? 1 : 0);
-  return std::min(code, kInfiniteEtaCode);
+  return std::min<uint32_t>(EncodeEtaRoundingUp(f), kInfiniteEtaCode);
 }
 
 BudgetSearchResult FindBudgetCode(int64_t budget, int64_t limit, uint32_t top,

@@ -2,7 +2,10 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "server/extract/extractor.h"
 #include "server/hierarchy/prepared_volume.h"
@@ -88,6 +91,32 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
     EXPECT_EQ(r.code, 2) << ca;
     EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
   }
+}
+
+// info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,
+// which is what extract --eps 0 writes.
+TEST(Cli, InfoPrintsTheTriangleCountByEps) {
+  const CliRun r = Cli("info --volume buckyball:33 --iso 0.05,0.15 --no-cache");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const size_t table = r.output.find("triangles by eps");
+  ASSERT_NE(table, std::string::npos) << r.output;
+  std::istringstream rows(r.output.substr(r.output.find('\n', r.output.find("  eps", table)) + 1));
+  std::vector<std::pair<std::string, long long>> counts;
+  std::string eps;
+  long long n;
+  while (rows >> eps >> n) counts.push_back({eps, n});
+  ASSERT_GE(counts.size(), 4u) << r.output;
+  for (size_t i = 1; i < counts.size(); ++i)
+    EXPECT_GE(counts[i].second, counts[i - 1].second) << counts[i].first;
+  EXPECT_EQ(counts.back().first, "0");
+  const std::string out = TempPath("cli-info-full.ply");
+  ASSERT_EQ(Cli("extract --volume buckyball:33 --iso 0.05,0.15 --eps 0 --no-cache -o " + out).code, 0);
+  auto ply = ReadPly(out);
+  ASSERT_TRUE(ply.ok()) << ply.status();
+  EXPECT_EQ(counts.back().second, (long long)ply->triangle_count());
+  const CliRun bad = Cli("info --volume buckyball:33 --iso 0.05,x --no-cache");
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_NE(bad.output.find("'x' is not a number"), std::string::npos) << bad.output;
 }
 
 // Two samples per axis is a valid volume: it pads to the smallest hierarchy, 3^3.
