@@ -188,6 +188,17 @@ absl::Status NotA(const std::string& type) {
   return absl::InvalidArgumentError("the request is not an " + type);
 }
 
+// Finishes a unary call OK with `response`, sent as bytes.
+template <class Message>
+void FinishWith(grpc::ServerUnaryReactor* reactor, const Message& response,
+                grpc::ByteBuffer* bytes) {
+  bool own = false;
+  if (!grpc::SerializationTraits<Message>::Serialize(response, bytes, &own).ok())
+    return reactor->Finish(
+        grpc::Status(grpc::StatusCode::INTERNAL, "cannot serialize the response"));
+  reactor->Finish(grpc::Status::OK);
+}
+
 // A stream of frame chunks: the write queue (one write in flight), the latest-view-wins frame
 // job, and finishing exactly once after the last write. Reactor is ServerWriteReactor (Extract)
 // or ServerBidiReactor (Session); both have the same write and finish calls.
@@ -591,17 +602,23 @@ IsostreamService::~IsostreamService() {
 }
 
 grpc::ServerUnaryReactor* IsostreamService::ListVolumes(grpc::CallbackServerContext* context,
-                                                        const pb::ListVolumesRequest*,
-                                                        pb::ListVolumesResponse* response) {
+                                                        const grpc::ByteBuffer* request_bytes,
+                                                        grpc::ByteBuffer* response_bytes) {
   auto* reactor = context->DefaultReactor();
   if (!core_->Authorized(context)) {
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
     return reactor;
   }
-  for (const auto& name : core_->catalogue.Names()) response->add_names(name);
-  response->set_generators_allowed(core_->catalogue.generators_allowed());
-  response->set_max_generator_dim(core_->catalogue.max_generator_dim());
-  reactor->Finish(grpc::Status::OK);
+  pb::ListVolumesRequest request;
+  if (!Parse(*request_bytes, &request)) {
+    reactor->Finish(ToGrpc(NotA("isostream.v1.ListVolumesRequest")));
+    return reactor;
+  }
+  pb::ListVolumesResponse response;
+  for (const auto& name : core_->catalogue.Names()) response.add_names(name);
+  response.set_generators_allowed(core_->catalogue.generators_allowed());
+  response.set_max_generator_dim(core_->catalogue.max_generator_dim());
+  FinishWith(reactor, response, response_bytes);
   return reactor;
 }
 
@@ -638,10 +655,7 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
     pb::VolumeInfo* response = &info;
     const auto finish = [&](const grpc::Status& status) {
       core->ReleaseSlot();
-      bool own = false;
-      if (status.ok() &&
-          !grpc::SerializationTraits<pb::VolumeInfo>::Serialize(info, response_bytes, &own).ok())
-        return reactor->Finish(grpc::Status(grpc::StatusCode::INTERNAL, "cannot serialize"));
+      if (status.ok()) return FinishWith(reactor, info, response_bytes);
       reactor->Finish(status);
     };
     const grpc::Status gone(grpc::StatusCode::CANCELLED, "cancelled by the client");
@@ -680,15 +694,19 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
 }
 
 grpc::ServerUnaryReactor* IsostreamService::GetServerStats(grpc::CallbackServerContext* context,
-                                                           const pb::GetServerStatsRequest*,
-                                                           pb::ServerStats* response) {
+                                                           const grpc::ByteBuffer* request_bytes,
+                                                           grpc::ByteBuffer* response_bytes) {
   auto* reactor = context->DefaultReactor();
   if (!core_->Authorized(context)) {
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
     return reactor;
   }
-  *response = Stats();
-  reactor->Finish(grpc::Status::OK);
+  pb::GetServerStatsRequest request;
+  if (!Parse(*request_bytes, &request)) {
+    reactor->Finish(ToGrpc(NotA("isostream.v1.GetServerStatsRequest")));
+    return reactor;
+  }
+  FinishWith(reactor, Stats(), response_bytes);
   return reactor;
 }
 

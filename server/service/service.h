@@ -17,14 +17,14 @@ struct ServiceCore;
 
 namespace internal {
 namespace pbv1 = ::isostream::v1;
-// The callback service, with the calls that carry a request (GetVolumeInfo, Extract, Session)
-// taking it as bytes: the service parses them itself, so a request that does not parse is
-// INVALID_ARGUMENT. (gRPC reports a failed parse on a stream as the client's half-close, which
-// ended a session with OK and no frame, and answers the others UNIMPLEMENTED with no message.)
-using ServiceBase = pbv1::Isostream::WithCallbackMethod_ListVolumes<
+// The callback service with every call taking its request, and giving its response, as bytes:
+// the service parses requests itself, so one that does not parse is INVALID_ARGUMENT naming
+// the type expected. (gRPC takes a failed parse on a stream for the client's half-close, which
+// ended a session with OK and no frame, and answers other calls UNIMPLEMENTED, no message.)
+using ServiceBase = pbv1::Isostream::WithRawCallbackMethod_ListVolumes<
     pbv1::Isostream::WithRawCallbackMethod_GetVolumeInfo<
         pbv1::Isostream::WithRawCallbackMethod_Extract<pbv1::Isostream::WithRawCallbackMethod_Session<
-            pbv1::Isostream::WithCallbackMethod_GetServerStats<pbv1::Isostream::Service>>>>>;
+            pbv1::Isostream::WithRawCallbackMethod_GetServerStats<pbv1::Isostream::Service>>>>>;
 }  // namespace internal
 
 class IsostreamService final : public internal::ServiceBase {
@@ -32,20 +32,18 @@ class IsostreamService final : public internal::ServiceBase {
   explicit IsostreamService(const DaemonConfig& config);
   ~IsostreamService() override;  // waits for worker jobs; call after the server has shut down
 
+  // Each call: its request in, its response out, as bytes (see ServiceBase).
   grpc::ServerUnaryReactor* ListVolumes(grpc::CallbackServerContext* context,
-                                        const ::isostream::v1::ListVolumesRequest* request,
-                                        ::isostream::v1::ListVolumesResponse* response) override;
-  // A GetVolumeInfoRequest in, a VolumeInfo out, as bytes (see ServiceBase).
+                                        const grpc::ByteBuffer* request,
+                                        grpc::ByteBuffer* response) override;
   grpc::ServerUnaryReactor* GetVolumeInfo(grpc::CallbackServerContext* context,
                                           const grpc::ByteBuffer* request,
                                           grpc::ByteBuffer* response) override;
   grpc::ServerUnaryReactor* GetServerStats(grpc::CallbackServerContext* context,
-                                           const ::isostream::v1::GetServerStatsRequest* request,
-                                           ::isostream::v1::ServerStats* response) override;
-  // A ViewRequest in, FrameChunks out, as bytes (see ServiceBase).
+                                           const grpc::ByteBuffer* request,
+                                           grpc::ByteBuffer* response) override;
   grpc::ServerWriteReactor<grpc::ByteBuffer>* Extract(grpc::CallbackServerContext* context,
                                                       const grpc::ByteBuffer* request) override;
-  // ViewRequests in, FrameChunks out, as bytes (see ServiceBase).
   grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Session(
       grpc::CallbackServerContext* context) override;
 

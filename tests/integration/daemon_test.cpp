@@ -451,15 +451,17 @@ std::pair<grpc::Status, int> RawCall(const std::string& address, const std::stri
 }
 
 // Bytes that are not the method's request (a field claiming 16 bytes with 3 behind it):
-// INVALID_ARGUMENT naming the type expected, no message back. gRPC itself would end a Session
-// with OK and no frame (it takes the failed parse for the client's half-close) and answer the
-// others UNIMPLEMENTED with no message.
+// INVALID_ARGUMENT naming the type expected, no message back, on every call. gRPC itself would
+// end a Session with OK and no frame (it takes the failed parse for the client's half-close)
+// and answer the others UNIMPLEMENTED with no message.
 TEST_F(Daemon, RequestBytesThatDoNotParseAreInvalidArgument) {
   const std::string garbage("\x0a\x10" "abc", 5);
   for (const auto& [method, type] : std::vector<std::pair<std::string, std::string>>{
            {"/isostream.v1.Isostream/Session", "ViewRequest"},
            {"/isostream.v1.Isostream/Extract", "ViewRequest"},
-           {"/isostream.v1.Isostream/GetVolumeInfo", "GetVolumeInfoRequest"}}) {
+           {"/isostream.v1.Isostream/GetVolumeInfo", "GetVolumeInfoRequest"},
+           {"/isostream.v1.Isostream/ListVolumes", "ListVolumesRequest"},
+           {"/isostream.v1.Isostream/GetServerStats", "GetServerStatsRequest"}}) {
     const auto [status, messages] = RawCall(daemon_->address(), method, garbage);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
         << method << ": " << status.error_message();
