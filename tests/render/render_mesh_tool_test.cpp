@@ -20,8 +20,10 @@ namespace {
   return ::isostream::testing::RunCommand(std::string(ISOSTREAM_RENDER_MESH_PATH) + " " + args);
 }
 
+// Per test: ctest runs the tests of this file in parallel processes.
 std::string Temp(const std::string& name) {
-  return ::testing::TempDir() + "render_mesh_tool_" + name;
+  return ::testing::TempDir() + "render_mesh_tool_" +
+         ::testing::UnitTest::GetInstance()->current_test_info()->name() + "_" + name;
 }
 
 // Fraction of pixels that differ from `background` by more than a rounding step.
