@@ -144,6 +144,9 @@ int main(int argc, char** argv) {
                                 "many seconds (default 300; 0: never)");
   auto* o_cache = app.add_option("--cache-dir", cache_dir, "hierarchy cache directory");
   auto* o_nocache = app.add_flag("--no-cache", no_cache, "never read or write the cache");
+  bool no_preload = false;
+  auto* o_nopreload = app.add_flag("--no-preload", no_preload,
+                                   "prepare catalogue volumes on first use, not at start");
   auto* o_cache_max = app.add_option("--cache-max-mb", cache_max_mb,
                                      "cache size cap; least recently used entries go (default "
                                      "16384)");
@@ -190,6 +193,7 @@ int main(int argc, char** argv) {
   if (*o_idle) config.limits.idle_timeout_s = idle_timeout_s;
   if (*o_cache) config.cache_dir = cache_dir;
   if (*o_nocache) config.no_cache = no_cache;
+  if (*o_nopreload) config.preload = !no_preload;
   if (*o_cache_max) config.cache_max_mb = cache_max_mb;
   if (*o_cert) config.tls_cert = tls_cert;
   if (*o_key) config.tls_key = tls_key;

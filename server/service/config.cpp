@@ -35,8 +35,8 @@ absl::Status Get(const json& object, const char* key, const std::string& where, 
 absl::Status Parse(const json& j, DaemonConfig* c) {
   ISOSTREAM_RETURN_IF_ERROR(
       CheckKeys(j,
-                {"listen", "threads", "cache_dir", "no_cache", "cache_max_mb", "volumes", "token",
-                 "tls", "limits", "frames", "log_level", "shutdown_grace_ms"},
+                {"listen", "threads", "cache_dir", "no_cache", "cache_max_mb", "volumes",
+                 "preload", "token", "tls", "limits", "frames", "log_level", "shutdown_grace_ms"},
                 ""));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "listen", "", &c->listen));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "threads", "", &c->threads));
@@ -44,6 +44,7 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "no_cache", "", &c->no_cache));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "cache_max_mb", "", &c->cache_max_mb));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "volumes", "", &c->volumes));
+  ISOSTREAM_RETURN_IF_ERROR(Get(j, "preload", "", &c->preload));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "token", "", &c->token));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "log_level", "", &c->log_level));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "shutdown_grace_ms", "", &c->shutdown_grace_ms));

@@ -31,6 +31,10 @@ struct DaemonConfig {
   Limits limits;
   // Catalogue: name -> volume spec (generator, .vdb, .nii, raw:...). Clients see names only.
   std::map<std::string, std::string> volumes;
+  // Prepare every catalogue volume at start, one after another in the background, so the
+  // first view of each does not wait for its load and hierarchy (requests meanwhile share the
+  // preparation in progress). Catalogue volumes stay prepared once used anyway.
+  bool preload = true;
   std::string tls_cert, tls_key;  // PEM files; both or neither
   std::string token;              // bearer token; empty: no auth
   // Frames are cut into chunks of at most this many triangles; the first chunks of a frame are
@@ -46,7 +50,7 @@ struct DaemonConfig {
 // Reads a JSON config file over `config` (keys absent from the file keep their value):
 //   {"listen": "127.0.0.1:7878", "threads": 2, "cache_dir": "/var/cache/isostream",
 //    "cache_max_mb": 16384,
-//    "volumes": {"head": "/data/head.nii.gz"}, "token": "...",
+//    "volumes": {"head": "/data/head.nii.gz"}, "preload": true, "token": "...",
 //    "tls": {"cert": "server.pem", "key": "server.key"},
 //    "limits": {"max_sessions": 16, "max_triangles": 4000000, "max_isovalues": 16,
 //               "deadline_ms": 30000, "max_dim": 257, "idle_timeout_s": 300},

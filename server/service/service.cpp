@@ -114,6 +114,10 @@ struct ServiceCore {
   // when the timeout is 0.
   void StartIdleReaper();
   void StopIdleReaper();
+  // config.preload: prepares the catalogue's volumes one by one on a thread of its own, until
+  // done or shutting down (a preparation in progress is not interrupted).
+  void StartPreload();
+  void JoinPreload();
 
   DaemonConfig config;
   ServerCounters counters;
@@ -122,6 +126,7 @@ struct ServiceCore {
   std::mutex streams_mu;
   std::condition_variable streams_cv;
   std::map<StreamBase*, std::weak_ptr<StreamBase>> streams;
+  std::thread preloader;
   std::thread idle_reaper;
   std::mutex reaper_mu;
   std::condition_variable reaper_cv;
@@ -164,6 +169,25 @@ void ServiceCore::StartIdleReaper() {
       for (auto& s : open) s->CloseIfIdle(now, timeout);
     }
   });
+}
+
+void ServiceCore::StartPreload() {
+  if (!config.preload || config.volumes.empty()) return;
+  preloader = std::thread([this] {
+    const auto t0 = Clock::now();
+    int prepared = 0;
+    for (const std::string& name : catalogue.Names()) {
+      if (shutting_down.load()) return;
+      if (catalogue.Get(name).ok()) ++prepared;  // failures are logged by the catalogue
+    }
+    spdlog::info("preloaded {} of {} catalogue volumes in {:.1f} s", prepared,
+                 config.volumes.size(),
+                 std::chrono::duration<double>(Clock::now() - t0).count());
+  });
+}
+
+void ServiceCore::JoinPreload() {
+  if (preloader.joinable()) preloader.join();
 }
 
 void ServiceCore::StopIdleReaper() {
@@ -592,9 +616,12 @@ class SessionStream final
 IsostreamService::IsostreamService(const DaemonConfig& config)
     : core_(std::make_shared<ServiceCore>(config)) {
   core_->StartIdleReaper();
+  core_->StartPreload();
 }
 
 IsostreamService::~IsostreamService() {
+  core_->shutting_down.store(true);  // a preload stops after the volume in progress
+  core_->JoinPreload();
   core_->StopIdleReaper();
   // Jobs first (they use the encoders), then the encoders.
   core_->frames.reset();

@@ -112,6 +112,40 @@ TEST_F(ConfiguredDaemon, ServesItsCatalogueOnly) {
   for (size_t i = 2; i + 1 < sizes.size(); ++i) EXPECT_EQ(sizes[i], 4096u);
 }
 
+// Reads the suite's daemon log.
+std::string DaemonLog(const ScratchDir& scratch) {
+  std::ifstream log(scratch.path() + "/isostreamd.log");
+  return std::string((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+}
+
+// The catalogue is prepared at start (config `preload`, on by default), with no request for it.
+TEST_F(ConfiguredDaemon, PreparesItsCatalogueAtStart) {
+  bool preloaded = false;
+  for (int i = 0; i < 400 && !preloaded; ++i) {
+    preloaded = DaemonLog(*scratch_).find("preloaded 2 of 2 catalogue volumes") != std::string::npos;
+    if (!preloaded) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_TRUE(preloaded) << DaemonLog(*scratch_);
+}
+
+// --no-preload: a catalogue volume is prepared by its first request, not before.
+TEST(NoPreloadDaemon, PreparesOnFirstUse) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--volume", "ball=buckyball:65", "--no-preload", "--no-cache"},
+                           dir.path() + "/isostreamd.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  EXPECT_EQ(DaemonLog(dir).find("prepared volume 'ball'"), std::string::npos) << DaemonLog(dir);
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  auto info = (*c)->GetVolumeInfo("ball");
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_NE(DaemonLog(dir).find("prepared volume 'ball'"), std::string::npos);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
   // A frame too big for the transport's buffers (raw, flat normals: ~85 bytes per triangle,
   // ~690k triangles), read by a client that stops after the first chunk until the checks
@@ -306,10 +340,7 @@ class OneSlotDaemon : public Daemon {
                                scratch_->path() + "/isostreamd.log"));
   }
   static bool Prepared(const std::string& name) {
-    std::ifstream log(scratch_->path() + "/isostreamd.log");
-    const std::string text((std::istreambuf_iterator<char>(log)),
-                           std::istreambuf_iterator<char>());
-    return text.find("prepared volume '" + name + "'") != std::string::npos;
+    return DaemonLog(*scratch_).find("prepared volume '" + name + "'") != std::string::npos;
   }
 };
 

@@ -37,6 +37,9 @@ TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
   EXPECT_EQ(c.limits.max_isovalues, 16);  // untouched default
   EXPECT_EQ(DaemonConfig().limits.idle_timeout_s, 300);
   EXPECT_EQ(c.chunk_triangles, 1024);
+  EXPECT_TRUE(c.preload);  // the default
+  ASSERT_TRUE(LoadText(R"({"preload": false})", &c).ok());
+  EXPECT_FALSE(c.preload);
 
   absl::Status s = LoadText(R"({"limits": {"max_sesions": 2}})", &c);
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
