@@ -16,6 +16,7 @@
 
 #include "server/extract/budget_memo.h"
 #include "server/hierarchy/prepared_volume.h"
+#include "server/service/volume_histogram.h"
 #include "shared/frame_codec.h"
 
 namespace isostream::service {
@@ -32,6 +33,8 @@ struct ServedVolume {
   float position_error = 0;  // PositionErrorBound(box, position_bits), world units
   // The eps each (isovalues, budget) needed: views of one volume share it. Thread-safe.
   mutable BudgetMemo budget_memo;
+  // GetVolumeInfo's sample histograms, per bin count. Thread-safe.
+  VolumeHistograms histograms;
 };
 
 using ServedVolumePtr = std::shared_ptr<const ServedVolume>;

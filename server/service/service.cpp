@@ -702,19 +702,11 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
     response->set_min_value(v.min_value);
     response->set_max_value(v.max_value);
     response->set_position_error((*served)->position_error);
-    // The hierarchy holds the samples (the data sits at the cube's origin corner).
-    std::vector<uint64_t> counts(size_t(bins), 0);
-    const double lo = v.min_value, width = double(v.max_value) - v.min_value;
-    const auto& d = h.data_dims();
-    for (int z = 0; z < d[2]; ++z) {
-      if (context->IsCancelled()) return finish(gone);
-      for (int y = 0; y < d[1]; ++y)
-        for (int x = 0; x < d[0]; ++x) {
-          const double t = width > 0 ? (h.sample(x, y, z) - lo) / width : 0.0;
-          ++counts[std::min(size_t(bins) - 1, size_t(std::max(0.0, t * bins)))];
-        }
-    }
-    for (uint64_t c : counts) response->add_histogram(c);
+    const auto counts = (*served)->histograms.Get(v, h, bins, [context] {
+      return context->IsCancelled();
+    });
+    if (!counts) return finish(gone);
+    for (uint64_t c : *counts) response->add_histogram(c);
     finish(grpc::Status::OK);
   });
   return reactor;

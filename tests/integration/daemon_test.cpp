@@ -68,6 +68,26 @@ TEST_F(Daemon, HealthServingAndCatalogue) {
   for (uint64_t h : info->histogram()) total += h;
   EXPECT_EQ(total, 65u * 65u * 65u);
   EXPECT_LT(info->min_value(), info->max_value());
+  // The histogram (computed in parallel, then kept) equals a direct count over the samples,
+  // and again when it comes from what the daemon kept; one bin is just the sample count.
+  const PreparedVolume local = Local("buckyball:65");
+  std::vector<uint64_t> direct(16, 0);
+  const double lo = info->min_value(), width = double(info->max_value()) - info->min_value();
+  for (int z = 0; z < 65; ++z)
+    for (int y = 0; y < 65; ++y)
+      for (int x = 0; x < 65; ++x) {
+        const double t = (local.hierarchy->sample(x, y, z) - lo) / width;
+        ++direct[std::min<size_t>(15, size_t(std::max(0.0, t * 16)))];
+      }
+  for (int round = 0; round < 2; ++round) {
+    auto again = round == 0 ? info : c->GetVolumeInfo("buckyball:65", 16);
+    ASSERT_TRUE(again.ok());
+    EXPECT_EQ(std::vector<uint64_t>(again->histogram().begin(), again->histogram().end()), direct);
+  }
+  auto one = c->GetVolumeInfo("buckyball:65", 1);
+  ASSERT_TRUE(one.ok());
+  ASSERT_EQ(one->histogram_size(), 1);
+  EXPECT_EQ(one->histogram(0), 65u * 65u * 65u);
   // Documented quantization: at most 1/64 of a voxel.
   EXPECT_GT(info->position_error(), 0);
   EXPECT_LE(info->position_error(), info->spacing().x() / 64 * 1.01);
