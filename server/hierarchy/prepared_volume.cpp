@@ -28,6 +28,11 @@ absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const Volu
   ISOSTREAM_ASSIGN_OR_RETURN(
       p.hierarchy, LoadOrBuildHierarchy(std::move(padded), cache, build, &p.cache, &p.cache_note));
   p.hierarchy_s = Seconds(t0);
+  // The hierarchy holds every sample and nothing reads the grid again; kept, it would be
+  // ~40% of what a served volume holds (cayley:513: 540 of 1430 MB).
+  auto facts = std::make_shared<Volume>(*p.volume);
+  facts->grid.reset();
+  p.volume = std::move(facts);
   for (int a = 0; a < 3; ++a) {
     p.grid_to_world.origin[a] = p.volume->origin[a];
     p.grid_to_world.spacing[a] = p.volume->spacing[a];

@@ -10,6 +10,8 @@
 namespace isostream {
 
 struct PreparedVolume {
+  // The volume's facts (dims, spacing, origin, value range). Its grid is released (null) once
+  // the hierarchy holds the samples: read them there (Hierarchy::sample).
   VolumePtr volume;
   HierarchyPtr hierarchy;
   GridToWorld grid_to_world;  // hierarchy cube point -> world (volume spacing and origin)

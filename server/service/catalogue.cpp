@@ -6,6 +6,8 @@
 #include <cctype>
 #include <cmath>
 
+#include "shared/malloc_tuning.h"
+
 namespace isostream::service {
 namespace {
 
@@ -123,6 +125,7 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
       served->position_bits);
   entry->served = served;
   prepared_.fetch_add(1);
+  ReturnFreedMemory();  // what preparing freed (the volume's grid above all) is not reused
   return entry->served;
 }
 
