@@ -484,6 +484,16 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
                 const int inside =
                     z < cube && y < cube ? std::max(0, std::min(m + 1, cube - x0)) : 0;
                 const size_t row = (size_t(z) * n + y) * n + x0;
+                if (inside == m + 1) {
+                  // A whole row (all but the cube's last): unrolled, the x placements are
+                  // constants (~1 G instructions less at 513^3 than computing each).
+#pragma GCC unroll 8
+                  for (int lx = 0; lx <= m; ++lx) {
+                    brick.value[local + HierarchyBrick::Local(0, lx)] = samples.values[row + lx];
+                    brick.eta[local + HierarchyBrick::Local(0, lx)] = eta_codes[row + lx];
+                  }
+                  continue;
+                }
                 for (int lx = 0; lx < inside; ++lx) {
                   brick.value[local + HierarchyBrick::Local(0, lx)] = samples.values[row + lx];
                   brick.eta[local + HierarchyBrick::Local(0, lx)] = eta_codes[row + lx];
