@@ -7,6 +7,7 @@
 #include <sys/stat.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -670,6 +671,31 @@ TEST(VolumeLoadErrors, NonFiniteSamples) {
   WriteBytes(path, bytes);
   ExpectError(LoadVolume("raw:" + path + ":4x3x10:float32"), absl::StatusCode::kInvalidArgument,
               "nan.raw", "NaN sample at index (2, 1, 9)");
+  // Rows of whole 8-sample leaf rows take the vector path: the same first offender, and the
+  // same range as a direct scan when all are finite.
+  std::vector<float> wide(17 * 9 * 9);
+  for (size_t i = 0; i < wide.size(); ++i) wide[i] = float(std::sin(0.37 * double(i))) * 3.0f;
+  std::vector<unsigned char> wide_bytes;
+  for (float v : wide) Put(wide_bytes, v, false);
+  path = ScratchPath("wide.raw");
+  WriteBytes(path, wide_bytes);
+  auto fine = LoadVolume("raw:" + path + ":17x9x9:float32");
+  ASSERT_TRUE(fine.ok()) << fine.status();
+  EXPECT_EQ((*fine)->min_value, *std::min_element(wide.begin(), wide.end()));
+  EXPECT_EQ((*fine)->max_value, *std::max_element(wide.begin(), wide.end()));
+  wide[(4 * 9 + 3) * 17 + 11] = std::numeric_limits<float>::quiet_NaN();   // (11, 3, 4)
+  wide[(8 * 9 + 8) * 17 + 3] = -std::numeric_limits<float>::infinity();    // later
+  wide_bytes.clear();
+  for (float v : wide) Put(wide_bytes, v, false);
+  WriteBytes(path, wide_bytes);
+  ExpectError(LoadVolume("raw:" + path + ":17x9x9:float32"), absl::StatusCode::kInvalidArgument,
+              "wide.raw", "NaN sample at index (11, 3, 4)");
+  wide[(4 * 9 + 3) * 17 + 11] = 0.0f;
+  wide_bytes.clear();
+  for (float v : wide) Put(wide_bytes, v, false);
+  WriteBytes(path, wide_bytes);
+  ExpectError(LoadVolume("raw:" + path + ":17x9x9:float32"), absl::StatusCode::kInvalidArgument,
+              "wide.raw", "Inf sample at index (3, 8, 8)");
 
   NiftiFile nf;
   nf.dims = dims;
