@@ -69,20 +69,24 @@ absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const 
   return ParseNumberList(text, what);
 }
 
-absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& volume) {
-  ExtractRequest r;
-  ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> iso, ParseNumbers(args.iso, "--iso"));
+absl::StatusOr<std::vector<float>> ParseIsovalues(const std::string& text) {
+  ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> iso, ParseNumbers(text, "--iso"));
+  std::vector<float> out;
   for (double v : iso) {
-    // Samples are single precision: an isovalue past its range could never cross them (and
-    // converting it would be undefined).
     if (std::isfinite(v) && std::fabs(v) > double(std::numeric_limits<float>::max())) {
-      char text[32];
-      std::snprintf(text, sizeof(text), "%g", v);
-      return absl::InvalidArgumentError(std::string("--iso ") + text +
+      char shown[32];
+      std::snprintf(shown, sizeof(shown), "%g", v);
+      return absl::InvalidArgumentError(std::string("--iso ") + shown +
                                         " is outside the single-precision range of the samples");
     }
-    r.isovalues.push_back(float(v));
+    out.push_back(float(v));
   }
+  return out;
+}
+
+absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& volume) {
+  ExtractRequest r;
+  ISOSTREAM_ASSIGN_OR_RETURN(r.isovalues, ParseIsovalues(args.iso));
   const auto given = [](const CLI::Option* flag) { return flag != nullptr && flag->count() > 0; };
   if (given(args.budget_flag)) {
     if (args.budget <= 0)

@@ -45,4 +45,8 @@ absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& v
 
 absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what);
 
+// --iso's list as the samples' single precision: a value past the float range is refused
+// (it could never cross a sample, and converting it would be undefined).
+absl::StatusOr<std::vector<float>> ParseIsovalues(const std::string& text);
+
 }  // namespace isostream::cli

@@ -1,16 +1,14 @@
 // `isostream info --volume SPEC [--iso ...]`: load a volume, build (or load) its hierarchy,
 // print facts; with isovalues, how many triangles each eps gives.
-#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <iostream>
-#include <limits>
 #include <thread>
+#include <utility>
 
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
 #include "server/extract/extractor.h"
-#include "shared/number_list.h"
 
 namespace isostream::cli {
 namespace {
@@ -19,21 +17,17 @@ namespace {
 // count changes only at the hierarchy's eta codes, CountTrianglesPerEtaCode), down to where it
 // reaches the full-resolution count.
 int PrintCountsByEps(const PreparedVolume& prepared, const std::string& iso_text, int threads) {
-  auto iso = ParseNumberList(iso_text, "--iso");
+  ExtractRequest r;
+  auto iso = ParseIsovalues(iso_text);
   if (!iso.ok()) {
     std::cerr << "isostream info: " << iso.status().message() << "\n";
     return 2;
   }
-  ExtractRequest r;
-  for (double v : *iso) r.isovalues.push_back(float(v));
+  r.isovalues = std::move(*iso);
   r.threads = threads;
-  const Hierarchy& h = *prepared.hierarchy;
-  const int half = (h.n() - 1) / 2;
-  constexpr uint32_t kInfinite = 0x7f80;  // the code of +inf
-  const uint32_t top = std::min<uint32_t>(EncodeEtaRoundingUp(h.eta(half, half, half)) + 1u,
-                                          kInfinite);
+  const uint32_t top = CoarsestEtaCode(*prepared.hierarchy);
   const auto t0 = std::chrono::steady_clock::now();
-  auto counts = CountTrianglesPerEtaCode(h, prepared.grid_to_world, r, 0, top);
+  auto counts = CountTrianglesPerEtaCode(*prepared.hierarchy, prepared.grid_to_world, r, 0, top);
   if (!counts.ok()) {
     std::cerr << "isostream info: " << counts.status().message() << "\n";
     return 2;
@@ -44,12 +38,9 @@ int PrintCountsByEps(const PreparedVolume& prepared, const std::string& iso_text
               ms);
   std::printf("  %-12s  %s\n", "eps", "triangles");
   const int64_t full = (*counts)[0];
-  constexpr uint32_t kCodesPerOctave = 128;
   uint32_t code = top;
-  for (;; code = code > kCodesPerOctave ? code - kCodesPerOctave : 0) {
-    const double eps = code >= kInfinite ? double(std::numeric_limits<float>::max())
-                                         : double(DecodeEta(uint16_t(code)));
-    std::printf("  %-12g  %lld\n", eps, (long long)(*counts)[code]);
+  for (;; code = code > kEtaCodesPerOctave ? code - kEtaCodesPerOctave : 0) {
+    std::printf("  %-12g  %lld\n", EtaCodeEps(code), (long long)(*counts)[code]);
     // Past 99% of the full-resolution count the octaves add little: that count closes.
     if (code == 0 || 100 * (*counts)[code] >= 99 * full) break;
   }

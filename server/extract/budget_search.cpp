@@ -5,7 +5,6 @@
 #include <limits>
 #include <vector>
 
-#include "server/hierarchy/hierarchy.h"
 
 namespace isostream::extract_internal {
 
@@ -16,7 +15,6 @@ constexpr int kMaxPasses = 60;
 // (at most ~15 more passes over the 2^15 codes).
 constexpr int kAimedPasses = 8;
 
-constexpr size_t kCodesPerOctave = 128;  // 7 mantissa bits
 // Slopes measured or bounded are kept within these: a cliff or a plateau in the curve says
 // little about the next octave.
 constexpr double kSteepest = -6.0, kShallowest = -0.3;
@@ -24,19 +22,6 @@ constexpr double kSteepest = -6.0, kShallowest = -0.3;
 double LogCount(int64_t n) { return std::log(double(std::max<int64_t>(n, 1))); }
 
 }  // namespace
-
-double EdgeEps(uint32_t code) {
-  if (code >= kInfiniteEtaCode) return double(std::numeric_limits<float>::max());
-  return DecodeEta(uint16_t(code));
-}
-
-uint32_t CodeAtLeast(double eps) {
-  if (!(eps > 0)) return 0;
-  if (eps > double(std::numeric_limits<float>::max())) return kInfiniteEtaCode;
-  float f = float(eps);
-  if (double(f) < eps) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return std::min<uint32_t>(EncodeEtaRoundingUp(f), kInfiniteEtaCode);
-}
 
 BudgetSearchResult FindBudgetCode(int64_t budget, int64_t limit, uint32_t top,
                                   const CountPass& count) {
@@ -71,8 +56,8 @@ BudgetSearchResult FindBudgetCode(int64_t budget, int64_t limit, uint32_t top,
     if (res.passes > kAimedPasses) {
       k = floor + (hi - floor) / 2;
     } else {
-      const double x_hi = std::log(EdgeEps(hi));
-      k = CodeAtLeast(std::exp(x_hi + (aim - LogCount(count_hi)) / slope));
+      const double x_hi = std::log(EtaCodeEps(hi));
+      k = EtaCodeAtLeast(std::exp(x_hi + (aim - LogCount(count_hi)) / slope));
       // Once a code past the limit is known, at least halve the codes between it and hi (the
       // upper half is also the cheaper one): a cliff in the count cannot hold the search.
       if (lo) k = std::max(k, *lo + (hi - *lo) / 2);
@@ -85,7 +70,7 @@ BudgetSearchResult FindBudgetCode(int64_t budget, int64_t limit, uint32_t top,
     if (*n > limit) {
       // Steeper than this between k and hi: aim again with it.
       lo = k;
-      const double dx = std::log(EdgeEps(k)) - std::log(EdgeEps(hi));
+      const double dx = std::log(EtaCodeEps(k)) - std::log(EtaCodeEps(hi));
       const double bound = (std::log(double(limit)) - LogCount(count_hi)) / dx;
       if (std::isfinite(bound) && bound < 0) slope = std::clamp(bound, kSteepest, slope);
       continue;
@@ -104,11 +89,11 @@ BudgetSearchResult FindBudgetCode(int64_t budget, int64_t limit, uint32_t top,
       continue;
     }
     // Fits. The slope over an octave or more (single codes step), to where the count halves.
-    size_t j = std::min<size_t>(kCodesPerOctave, counts.size() - 1);
+    size_t j = std::min<size_t>(size_t{kEtaCodesPerOctave}, counts.size() - 1);
     while (j + 1 < counts.size() && counts[j] * 2 > *n) ++j;
     if (k > 0 && counts[j] < *n && counts[j] > 0) {
       const double measured = (LogCount(counts[j]) - LogCount(*n)) /
-                              (std::log(EdgeEps(k + uint32_t(j))) - std::log(EdgeEps(k)));
+                              (std::log(EtaCodeEps(k + uint32_t(j))) - std::log(EtaCodeEps(k)));
       if (std::isfinite(measured)) slope = std::clamp(measured, kSteepest, kShallowest);
     }
     fits(k, *n, curve);

@@ -1,6 +1,6 @@
 // The search for the smallest eps whose mesh fits a triangle budget, over eta codes
-// (count_curve.h: the count changes only at edges E_k, so the answer is the smallest code k
-// with count(E_k) <= budget, exactly). Private to server/extract; separate from the passes it
+// (count_curve.h: the count changes only at codes, so the answer is the smallest code k with
+// count(EtaCodeEps(k)) <= budget, exactly). Private to server/extract; separate from the passes it
 // drives so that its logic can be tested on synthetic count functions.
 #pragma once
 
@@ -9,17 +9,11 @@
 #include <optional>
 
 #include "server/extract/count_curve.h"
+#include "server/extract/extractor.h"
 
 namespace isostream::extract_internal {
 
-// The eps of edge `code`: the float with bits code << 16. The +inf edge is reported as the
-// largest float, which stops the same etas (every finite one) and stays finite.
-double EdgeEps(uint32_t code);
-
-// The smallest code whose edge is >= eps (eps >= 0).
-uint32_t CodeAtLeast(double eps);
-
-// One count pass at edge `code`: the triangle count, or any value past the search's limit if
+// One count pass at the eps of `code`: the triangle count, or any value past the search's limit if
 // the count passes it; when `curve` is given (range [code, curve->last()]) and the count is
 // within the limit, the pass also fills it. nullopt: the pass was stopped (cancelled, or past
 // a deadline); the search then ends at once.

@@ -1,14 +1,14 @@
 // The triangle count as a function of eps, gathered by one count pass: what the budget search
 // reads instead of counting again at every eps it tries. Private to server/extract.
 //
-// Etas are stored as the top 16 bits of a float (hierarchy.h), so every eta is one of the
-// "edges" E_k (the float with bits k << 16, k its stored code), and a node stops where
-// eta < eps: the count is a step function of eps that changes only at edges and is constant on
-// each (E_{k-1}, E_k]. count(E_k) is therefore the count for every eps in that interval.
+// Etas are stored as 16-bit codes (extractor.h: code k stands for E_k = EtaCodeEps(k)), and a
+// node stops where eta < eps: the count is a step function of eps that changes only at codes
+// and is constant on each (E_{k-1}, E_k]. count(E_k) is therefore the count for every eps in
+// that interval.
 //
 // A pass at eps = E_p visits every node that any eps >= E_p visits (saturated etas nest the
 // meshes). A visited node T, reached below ancestors whose smallest code is `cap`, is a leaf for
-// the edges k with code(T) < k <= cap (any k <= cap when T is at the finest level), and then
+// the codes k with code(T) < k <= cap (any k <= cap when T is at the finest level), and then
 // adds its marching-tetrahedra triangles: so count(E_k) for all k >= p is a sum of intervals,
 // kept as a difference array over [p, top]. Below p, the pass also shows how far the count
 // stays the same: down to the largest code among the nodes that stopped above the finest level.
@@ -22,9 +22,6 @@
 #include "server/extract/tree_node.h"
 
 namespace isostream::extract_internal {
-
-// The code whose edge is +inf: eps = +inf stops every finite eta.
-inline constexpr uint32_t kInfiniteEtaCode = 0x7f80;
 
 // The stored code of the eta at a node's refinement vertex (unused at the finest level).
 inline uint32_t EtaCode(const Context& c, const Node& t) {
@@ -48,14 +45,14 @@ inline int LeafTriangles(const Context& c, const Node& t) {
 
 class CountCurve {
  public:
-  // Counts at the edges k in [first, last].
+  // Counts at the codes k in [first, last].
   CountCurve(uint32_t first, uint32_t last)
       : first_(first), last_(last), diff_(size_t(last - first) + 2, 0) {}
 
   uint32_t first() const { return first_; }
   uint32_t last() const { return last_; }
 
-  // n triangles at every edge k in [lo, hi] (clipped to the curve's range).
+  // n triangles at every code k in [lo, hi] (clipped to the curve's range).
   void Add(uint32_t lo, uint32_t hi, int64_t n) {
     lo = std::max(lo, first_);
     hi = std::min(hi, last_);

@@ -178,7 +178,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c,
     t.xref_value = c.ValueOffset(x);
     t.xref_eta = c.EtaOffset(x);
     t.child0_first = extract_internal::ChildZeroFirst(c, t.cls, x);
-    t.eta_cap = extract_internal::kInfiniteEtaCode;
+    t.eta_cap = kInfiniteEtaCode;
     items.push_back(t);
   }
   constexpr size_t kTargetSubtrees = 256;
@@ -263,15 +263,33 @@ absl::StatusOr<int64_t> CountTriangles(const Hierarchy& h, const GridToWorld& xf
   return arena.execute([&] { return CountAt(c, limit); });
 }
 
+double EtaCodeEps(uint32_t code) {
+  if (code >= kInfiniteEtaCode) return double(std::numeric_limits<float>::max());
+  return DecodeEta(uint16_t(code));
+}
+
+uint32_t EtaCodeAtLeast(double eps) {
+  if (!(eps > 0)) return 0;
+  if (eps > double(std::numeric_limits<float>::max())) return kInfiniteEtaCode;
+  float f = float(eps);
+  if (double(f) < eps) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return std::min<uint32_t>(EncodeEtaRoundingUp(f), kInfiniteEtaCode);
+}
+
+uint32_t CoarsestEtaCode(const Hierarchy& h) {
+  const int half = (h.n() - 1) / 2;
+  return std::min(EtaCodeAtLeast(h.eta(half, half, half)) + 1, kInfiniteEtaCode);
+}
+
 absl::StatusOr<std::vector<int64_t>> CountTrianglesPerEtaCode(const Hierarchy& h,
                                                               const GridToWorld& xf,
                                                               const ExtractRequest& r,
                                                               uint32_t first_code,
                                                               uint32_t last_code) {
   ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
-  if (first_code > last_code || last_code > extract_internal::kInfiniteEtaCode)
+  if (first_code > last_code || last_code > kInfiniteEtaCode)
     return absl::InvalidArgumentError("eta codes must satisfy first <= last <= 0x7f80");
-  Context c = MakeContext(h, xf, r, extract_internal::EdgeEps(first_code));
+  Context c = MakeContext(h, xf, r, EtaCodeEps(first_code));
   c.block_level = -1;
   CountCurve curve(first_code, last_code);
   tbb::task_arena arena(r.threads > 0 ? r.threads : tbb::task_arena::automatic);
@@ -299,7 +317,6 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     // by passes that count only, stop at 4x the budget and gather the count at every coarser
     // code on the way (count_curve.h; node by node, as blocks skip the etas it needs).
     auto t0 = std::chrono::steady_clock::now();
-    const int half = (h.n() - 1) / 2;
     // Saturated: a budget past any frame ("everything") must not overflow the limit.
     constexpr int64_t kMaxLimit = std::numeric_limits<int64_t>::max() / 2;
     const int64_t limit = r.budget > kMaxLimit / 4 ? kMaxLimit : 4 * r.budget;
@@ -309,19 +326,17 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     auto count_at = [&](uint32_t code, CountCurve* curve) -> std::optional<int64_t> {
       if (stopped.ok()) stopped = StopReason(observer);
       if (!stopped.ok()) return std::nullopt;
-      Context c = MakeContext(h, xf, r, extract_internal::EdgeEps(code));
+      Context c = MakeContext(h, xf, r, EtaCodeEps(code));
       if (curve) c.block_level = -1;
       const int64_t n = CountAt(c, limit, observer, &stopped, curve);
       if (!stopped.ok()) return std::nullopt;
       return n;
     };
-    // The root's eta is the largest (saturated); one code above it nothing refines.
-    const uint32_t top = std::min(extract_internal::CodeAtLeast(h.eta(half, half, half)) + 1,
-                                  extract_internal::kInfiniteEtaCode);
-    const extract_internal::BudgetSearchResult found = arena.execute(
-        [&] { return extract_internal::FindBudgetCode(r.budget, limit, top, count_at); });
+    const extract_internal::BudgetSearchResult found = arena.execute([&] {
+      return extract_internal::FindBudgetCode(r.budget, limit, CoarsestEtaCode(h), count_at);
+    });
     st.budget_passes = found.passes;
-    eps = extract_internal::EdgeEps(found.code);
+    eps = EtaCodeEps(found.code);
     counted = found.count;
     if (!stopped.ok()) return stopped;
     st.budget_ms = Ms(t0);

@@ -50,10 +50,23 @@ absl::StatusOr<int64_t> CountTriangles(const Hierarchy& hierarchy, const GridToW
                                        const ExtractRequest& request, double eps,
                                        int64_t limit = INT64_MAX);
 
+// Etas are stored as 16-bit codes, the top half of a float: code k stands for the eps whose
+// float has bits k << 16, and a node stops where its eta is below eps, so the triangle count
+// changes only at codes and is constant between them.
+inline constexpr uint32_t kInfiniteEtaCode = 0x7f80;  // +inf
+inline constexpr uint32_t kEtaCodesPerOctave = 128;   // 7 mantissa bits
+// The eps of `code`; the +inf code as the largest float (which stops the same etas: every
+// finite one) so that it stays finite.
+double EtaCodeEps(uint32_t code);
+// The smallest code whose eps is >= eps (eps >= 0).
+uint32_t EtaCodeAtLeast(double eps);
+// One code above the hierarchy's largest eta (its root's, saturated): nothing refines there,
+// so its count is the coarsest mesh's.
+uint32_t CoarsestEtaCode(const Hierarchy& hierarchy);
+
 // The triangle count as a function of eps, from one counting pass: element i is the count at
-// the eps of eta code first_code + i (the float with bits code << 16; etas are stored as such
-// codes, so the count only changes at them and is constant between). Codes run to
-// last_code <= 0x7f80 (+inf). What the budget search reads; exposed for tests and tools.
+// the eps of code first_code + i, for codes up to last_code <= kInfiniteEtaCode. What the
+// budget search reads; exposed for tests and tools.
 absl::StatusOr<std::vector<int64_t>> CountTrianglesPerEtaCode(const Hierarchy& hierarchy,
                                                               const GridToWorld& xf,
                                                               const ExtractRequest& request,

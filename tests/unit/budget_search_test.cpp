@@ -18,11 +18,8 @@ namespace isostream {
 namespace {
 
 using extract_internal::BudgetSearchResult;
-using extract_internal::CodeAtLeast;
 using extract_internal::CountCurve;
-using extract_internal::EdgeEps;
 using extract_internal::FindBudgetCode;
-using extract_internal::kInfiniteEtaCode;
 using testing::BlobsField;
 using testing::CayleyField;
 using testing::MakeHierarchy;
@@ -35,17 +32,17 @@ ExtractRequest Request(std::vector<float> iso) {
 }
 
 TEST(EtaCodes, EdgesAndCodesRoundTrip) {
-  EXPECT_EQ(EdgeEps(0), 0.0);
-  EXPECT_EQ(CodeAtLeast(0.0), 0u);
-  EXPECT_EQ(CodeAtLeast(1.0), 0x3f80u);
-  EXPECT_EQ(EdgeEps(0x3f80), 1.0);
-  EXPECT_EQ(CodeAtLeast(std::nextafter(1.0, 2.0)), 0x3f81u);  // the next edge up
-  EXPECT_EQ(CodeAtLeast(1e300), kInfiniteEtaCode);
-  EXPECT_EQ(EdgeEps(kInfiniteEtaCode), double(std::numeric_limits<float>::max()));
+  EXPECT_EQ(EtaCodeEps(0), 0.0);
+  EXPECT_EQ(EtaCodeAtLeast(0.0), 0u);
+  EXPECT_EQ(EtaCodeAtLeast(1.0), 0x3f80u);
+  EXPECT_EQ(EtaCodeEps(0x3f80), 1.0);
+  EXPECT_EQ(EtaCodeAtLeast(std::nextafter(1.0, 2.0)), 0x3f81u);  // the next edge up
+  EXPECT_EQ(EtaCodeAtLeast(1e300), kInfiniteEtaCode);
+  EXPECT_EQ(EtaCodeEps(kInfiniteEtaCode), double(std::numeric_limits<float>::max()));
   for (uint32_t code : {1u, 0x100u, 0x3a12u, 0x7f7fu}) {
-    EXPECT_EQ(CodeAtLeast(EdgeEps(code)), code);
-    EXPECT_EQ(CodeAtLeast(EdgeEps(code) * (1 - 1e-9)), code);
-    EXPECT_EQ(CodeAtLeast(EdgeEps(code) * (1 + 1e-9)), code + 1);
+    EXPECT_EQ(EtaCodeAtLeast(EtaCodeEps(code)), code);
+    EXPECT_EQ(EtaCodeAtLeast(EtaCodeEps(code) * (1 - 1e-9)), code);
+    EXPECT_EQ(EtaCodeAtLeast(EtaCodeEps(code) * (1 + 1e-9)), code + 1);
   }
 }
 
@@ -66,9 +63,8 @@ TEST(CountCurve, EqualsACountAtEveryCode) {
   const auto h = MakeHierarchy(5, BlobsField);
   for (const std::vector<float>& iso : {std::vector<float>{0.5f}, {0.2f, 0.5f, 0.8f}}) {
     const ExtractRequest r = Request(iso);
-    const int half = (h->n() - 1) / 2;
-    const uint32_t top = CodeAtLeast(h->eta(half, half, half)) + 1;
-    for (uint32_t first : {0u, CodeAtLeast(1e-3), CodeAtLeast(0.05)}) {
+    const uint32_t top = CoarsestEtaCode(*h);
+    for (uint32_t first : {0u, EtaCodeAtLeast(1e-3), EtaCodeAtLeast(0.05)}) {
       auto curve = CountTrianglesPerEtaCode(*h, GridToWorld{}, r, first, top);
       ASSERT_TRUE(curve.ok()) << curve.status();
       ASSERT_EQ(curve->size(), size_t(top - first + 1));
@@ -77,15 +73,16 @@ TEST(CountCurve, EqualsACountAtEveryCode) {
         changes += code > first && (*curve)[code - first] != (*curve)[code - first - 1];
         // From eps 0, every code below 1e-3 (sub-voxel etas, ~8000 codes) would take seconds:
         // the lowest 256 and every 17th.
-        if (first == 0 && code > 256 && code < CodeAtLeast(1e-3) && code % 17 != 0) continue;
-        auto direct = CountTriangles(*h, GridToWorld{}, r, EdgeEps(code));
+        if (first == 0 && code > 256 && code < EtaCodeAtLeast(1e-3) && code % 17 != 0) continue;
+        auto direct = CountTriangles(*h, GridToWorld{}, r, EtaCodeEps(code));
         ASSERT_TRUE(direct.ok());
         ASSERT_EQ((*curve)[code - first], *direct) << "code " << code << " first " << first;
       }
       EXPECT_GT(changes, 10) << "the curve should step many times over this range";
       // Between two codes the count is that of the upper one (a node stops where eta < eps).
       const uint32_t mid = first + (top - first) / 2;
-      auto between = CountTriangles(*h, GridToWorld{}, r, 0.5 * (EdgeEps(mid) + EdgeEps(mid + 1)));
+      auto between =
+          CountTriangles(*h, GridToWorld{}, r, 0.5 * (EtaCodeEps(mid) + EtaCodeEps(mid + 1)));
       ASSERT_TRUE(between.ok());
       EXPECT_EQ(*between, (*curve)[mid + 1 - first]);
     }
@@ -106,8 +103,8 @@ TEST(BudgetSearch, FindsTheExactSmallestCodeOnAHierarchy) {
     const double eps = res->stats.eps_used;
     EXPECT_LE(res->stats.triangles, budget) << budget;
     EXPECT_LE(res->stats.budget_passes, 12) << budget;
-    const uint32_t code = CodeAtLeast(eps);
-    ASSERT_EQ(EdgeEps(code), eps) << "the answer is an eta code's edge";
+    const uint32_t code = EtaCodeAtLeast(eps);
+    ASSERT_EQ(EtaCodeEps(code), eps) << "the answer is an eta code's edge";
     // Passes are deterministic, so the search is too, whatever the thread count.
     for (int threads : {1, 2}) {
       ExtractRequest t = r;
@@ -118,9 +115,9 @@ TEST(BudgetSearch, FindsTheExactSmallestCodeOnAHierarchy) {
       EXPECT_EQ(again->stats.budget_passes, res->stats.budget_passes);
     }
     if (code > 0) {
-      auto below = CountTriangles(*h, GridToWorld{}, r, EdgeEps(code - 1));
+      auto below = CountTriangles(*h, GridToWorld{}, r, EtaCodeEps(code - 1));
       ASSERT_TRUE(below.ok());
-      EXPECT_GT(*below, budget) << "eps " << EdgeEps(code - 1) << " fits too, budget " << budget;
+      EXPECT_GT(*below, budget) << "eps " << EtaCodeEps(code - 1) << " fits too, budget " << budget;
     }
   }
 }
@@ -158,10 +155,10 @@ uint32_t BruteForce(const std::function<int64_t(uint32_t)>& count_at, int64_t bu
 TEST(BudgetSearch, FindsTheExactCodeOnSyntheticCounts) {
   const uint32_t top = 0x4000;  // eps 2
   std::vector<std::pair<const char*, std::function<int64_t(uint32_t)>>> shapes = {
-      {"1/eps", [](uint32_t k) { return int64_t(50 + 1e3 / std::max(EdgeEps(k), 1e-12)); }},
+      {"1/eps", [](uint32_t k) { return int64_t(50 + 1e3 / std::max(EtaCodeEps(k), 1e-12)); }},
       {"1/eps^2.5",
        [](uint32_t k) {
-         return int64_t(std::min(8 + 1e2 / std::pow(EdgeEps(k), 2.5), 1e15));  // inf at 0: 1e15
+         return int64_t(std::min(8 + 1e2 / std::pow(EtaCodeEps(k), 2.5), 1e15));  // inf at 0: 1e15
        }},
       // Flat over 60 octaves, then a cliff: the search must stride over the plateau.
       {"plateau", [](uint32_t k) { return k >= 0x2000 ? int64_t(30) : int64_t(5'000'000); }},
