@@ -10,7 +10,6 @@
 #include <mutex>
 #include <optional>
 #include <thread>
-#include <type_traits>
 
 #include "server/service/catalogue.h"
 #include "server/service/frame_producer.h"
@@ -200,16 +199,28 @@ void ServiceCore::StopIdleReaper() {
 }
 
 // Requests arrive as bytes (service.h, ServiceBase): parsed here, so one that does not parse
-// gets a clear INVALID_ARGUMENT.
+// gets INVALID_ARGUMENT naming the message type expected.
 template <class Message>
-bool Parse(const grpc::ByteBuffer& bytes, Message* message) {
+absl::Status Parse(const grpc::ByteBuffer& bytes, Message* message) {
   grpc::ByteBuffer copy(bytes);  // shares the slices; Deserialize consumes its buffer
   message->Clear();
-  return grpc::SerializationTraits<Message>::Deserialize(&copy, message).ok();
+  if (grpc::SerializationTraits<Message>::Deserialize(&copy, message).ok()) return absl::OkStatus();
+  return absl::InvalidArgumentError("the request is not an " + Message::descriptor()->full_name());
 }
 
-absl::Status NotA(const std::string& type) {
-  return absl::InvalidArgumentError("the request is not an " + type);
+// The start of every unary call: the token, then the request. False once it has finished the
+// call with the reason.
+template <class Request>
+bool AcceptUnary(const ServiceCore& core, grpc::CallbackServerContext* context,
+                 grpc::ServerUnaryReactor* reactor, const grpc::ByteBuffer& bytes,
+                 Request* request) {
+  if (!core.Authorized(context)) {
+    reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
+    return false;
+  }
+  const absl::Status parsed = Parse(bytes, request);
+  if (!parsed.ok()) reactor->Finish(ToGrpc(parsed));
+  return parsed.ok();
 }
 
 // Finishes a unary call OK with `response`, sent as bytes.
@@ -459,23 +470,17 @@ class ChunkStream : public Reactor, public StreamBase {
     return finish_status_;
   }
 
-  // Writes writing_ (gRPC reads it, or its bytes, until OnWriteDone). A reactor that writes
-  // bytes gets the chunk serialized here.
+  // Writes writing_'s bytes (gRPC reads them until OnWriteDone; every call writes bytes,
+  // service.h).
   void StartChunkWrite() {
-    if constexpr (std::is_base_of_v<grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>,
-                                    Reactor> ||
-                  std::is_base_of_v<grpc::ServerWriteReactor<grpc::ByteBuffer>, Reactor>) {
-      bool own = false;
-      writing_bytes_.Clear();  // the writer wants an empty buffer; the last write is done
-      const grpc::Status s =
-          grpc::SerializationTraits<pb::FrameChunk>::Serialize(writing_, &writing_bytes_, &own);
-      // Only a message past 2 GB fails (chunks are a few MB): the client then sees bytes that
-      // do not parse, not a stream that stops.
-      if (!s.ok()) spdlog::error("{}: cannot serialize a chunk: {}", peer_, s.error_message());
-      this->StartWrite(&writing_bytes_);
-    } else {
-      this->StartWrite(&writing_);
-    }
+    bool own = false;
+    writing_bytes_.Clear();  // the writer wants an empty buffer; the last write is done
+    const grpc::Status s =
+        grpc::SerializationTraits<pb::FrameChunk>::Serialize(writing_, &writing_bytes_, &own);
+    // Only a message past 2 GB fails (chunks are a few MB): the client then sees bytes that
+    // do not parse, not a stream that stops.
+    if (!s.ok()) spdlog::error("{}: cannot serialize a chunk: {}", peer_, s.error_message());
+    this->StartWrite(&writing_bytes_);
   }
 
   bool TakeNextWriteLocked() {
@@ -505,8 +510,8 @@ class ChunkStream : public Reactor, public StreamBase {
 
   mutable std::mutex mu_;
   std::deque<pb::FrameChunk> queue_;
-  pb::FrameChunk writing_;  // the message in flight; gRPC reads it until OnWriteDone
-  grpc::ByteBuffer writing_bytes_;  // its bytes, for a reactor that writes bytes
+  pb::FrameChunk writing_;          // the chunk in flight
+  grpc::ByteBuffer writing_bytes_;  // its bytes, which gRPC reads until OnWriteDone
   bool write_in_flight_ = false;
   uint64_t generation_ = 0;
   std::shared_ptr<std::atomic<bool>> cancel_ = std::make_shared<std::atomic<bool>>(false);
@@ -532,7 +537,8 @@ class ExtractStream final : public ChunkStream<grpc::ServerWriteReactor<grpc::By
     if (!core_->Authorized(context_))
       return Reject(absl::UnauthenticatedError("missing or wrong bearer token"));
     pb::ViewRequest view;
-    if (!Parse(bytes, &view)) return Reject(NotA("isostream.v1.ViewRequest"));
+    const absl::Status parsed = Parse(bytes, &view);
+    if (!parsed.ok()) return Reject(parsed);
     auto request = ToExtractRequest(view, core_->config.limits, core_->config.threads);
     if (!request.ok()) return Reject(request.status());
     const absl::Status known = core_->catalogue.Check(view.volume());
@@ -581,11 +587,11 @@ class SessionStream final
       CompleteIfIdleLocked();
       finish = TakeFinishLocked();
     } else {
-      const bool parsed = Parse(incoming_bytes_, &incoming_);
+      const absl::Status parsed = Parse(incoming_bytes_, &incoming_);
       incoming_bytes_.Clear();
       absl::StatusOr<ExtractRequest> request =
-          parsed ? ToExtractRequest(incoming_, core_->config.limits, core_->config.threads)
-                 : NotA("isostream.v1.ViewRequest");
+          parsed.ok() ? ToExtractRequest(incoming_, core_->config.limits, core_->config.threads)
+                      : absl::StatusOr<ExtractRequest>(parsed);
       if (request.ok()) {
         const absl::Status known = core_->catalogue.Check(incoming_.volume());
         if (!known.ok()) request = known;
@@ -632,15 +638,8 @@ grpc::ServerUnaryReactor* IsostreamService::ListVolumes(grpc::CallbackServerCont
                                                         const grpc::ByteBuffer* request_bytes,
                                                         grpc::ByteBuffer* response_bytes) {
   auto* reactor = context->DefaultReactor();
-  if (!core_->Authorized(context)) {
-    reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
-    return reactor;
-  }
   pb::ListVolumesRequest request;
-  if (!Parse(*request_bytes, &request)) {
-    reactor->Finish(ToGrpc(NotA("isostream.v1.ListVolumesRequest")));
-    return reactor;
-  }
+  if (!AcceptUnary(*core_, context, reactor, *request_bytes, &request)) return reactor;
   pb::ListVolumesResponse response;
   for (const auto& name : core_->catalogue.Names()) response.add_names(name);
   response.set_generators_allowed(core_->catalogue.generators_allowed());
@@ -653,18 +652,10 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
                                                           const grpc::ByteBuffer* request_bytes,
                                                           grpc::ByteBuffer* response_bytes) {
   auto* reactor = context->DefaultReactor();
-  if (!core_->Authorized(context)) {
-    reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
-    return reactor;
-  }
-  pb::GetVolumeInfoRequest parsed;
-  if (!Parse(*request_bytes, &parsed)) {
-    reactor->Finish(ToGrpc(NotA("isostream.v1.GetVolumeInfoRequest")));
-    return reactor;
-  }
-  const pb::GetVolumeInfoRequest* request = &parsed;
-  const int bins = request->histogram_bins() == 0 ? 64 : request->histogram_bins();
-  absl::Status known = core_->catalogue.Check(request->name());
+  pb::GetVolumeInfoRequest request;
+  if (!AcceptUnary(*core_, context, reactor, *request_bytes, &request)) return reactor;
+  const int bins = request.histogram_bins() == 0 ? 64 : request.histogram_bins();
+  absl::Status known = core_->catalogue.Check(request.name());
   if (known.ok() && (bins < 1 || bins > 4096))
     known = absl::InvalidArgumentError("histogram_bins must be in 1..4096");
   // Preparing may build a hierarchy (seconds) and the histogram reads every sample: the call
@@ -676,10 +667,9 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
     return reactor;
   }
   ServiceCore* core = core_.get();
-  const std::string name = request->name();
+  const std::string name = request.name();
   core_->frames->Submit([core, name, bins, reactor, response_bytes, context] {
     pb::VolumeInfo info;
-    pb::VolumeInfo* response = &info;
     const auto finish = [&](const grpc::Status& status) {
       core->ReleaseSlot();
       if (status.ok()) return FinishWith(reactor, info, response_bytes);
@@ -691,22 +681,22 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
     if (!served.ok()) return finish(ToGrpc(served.status()));
     const Volume& v = *(*served)->prepared.volume;
     const Hierarchy& h = *(*served)->prepared.hierarchy;
-    response->set_name(name);
-    for (int a = 0; a < 3; ++a) response->add_dims(v.dims[a]);
-    response->mutable_spacing()->set_x(v.spacing[0]);
-    response->mutable_spacing()->set_y(v.spacing[1]);
-    response->mutable_spacing()->set_z(v.spacing[2]);
-    response->mutable_origin()->set_x(v.origin[0]);
-    response->mutable_origin()->set_y(v.origin[1]);
-    response->mutable_origin()->set_z(v.origin[2]);
-    response->set_min_value(v.min_value);
-    response->set_max_value(v.max_value);
-    response->set_position_error((*served)->position_error);
+    info.set_name(name);
+    for (int a = 0; a < 3; ++a) info.add_dims(v.dims[a]);
+    info.mutable_spacing()->set_x(v.spacing[0]);
+    info.mutable_spacing()->set_y(v.spacing[1]);
+    info.mutable_spacing()->set_z(v.spacing[2]);
+    info.mutable_origin()->set_x(v.origin[0]);
+    info.mutable_origin()->set_y(v.origin[1]);
+    info.mutable_origin()->set_z(v.origin[2]);
+    info.set_min_value(v.min_value);
+    info.set_max_value(v.max_value);
+    info.set_position_error((*served)->position_error);
     const auto counts = (*served)->histograms.Get(v, h, bins, [context] {
       return context->IsCancelled();
     });
     if (!counts) return finish(gone);
-    for (uint64_t c : *counts) response->add_histogram(c);
+    for (uint64_t c : *counts) info.add_histogram(c);
     finish(grpc::Status::OK);
   });
   return reactor;
@@ -716,15 +706,8 @@ grpc::ServerUnaryReactor* IsostreamService::GetServerStats(grpc::CallbackServerC
                                                            const grpc::ByteBuffer* request_bytes,
                                                            grpc::ByteBuffer* response_bytes) {
   auto* reactor = context->DefaultReactor();
-  if (!core_->Authorized(context)) {
-    reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
-    return reactor;
-  }
   pb::GetServerStatsRequest request;
-  if (!Parse(*request_bytes, &request)) {
-    reactor->Finish(ToGrpc(NotA("isostream.v1.GetServerStatsRequest")));
-    return reactor;
-  }
+  if (!AcceptUnary(*core_, context, reactor, *request_bytes, &request)) return reactor;
   FinishWith(reactor, Stats(), response_bytes);
   return reactor;
 }
