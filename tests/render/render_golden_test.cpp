@@ -73,23 +73,9 @@ class GoldenTest : public RenderTest {
     return image.ok() ? *image : Image{};
   }
 
-  // Fraction of pixels that differ from the background: guards against comparing two empty
-  // pictures.
+  // Guards against comparing two empty pictures.
   double Coverage(const Image& image) {
-    const glm::vec4 bg = renderer_->background();
-    size_t covered = 0;
-    for (int y = 0; y < image.height; ++y) {
-      for (int x = 0; x < image.width; ++x) {
-        const uint8_t* p = image.pixel(x, y);
-        for (int c = 0; c < 3; ++c) {
-          if (std::abs(int(p[c]) - int(std::lround(bg[c] * 255.0f))) > 2) {
-            ++covered;
-            break;
-          }
-        }
-      }
-    }
-    return double(covered) / (double(image.width) * image.height);
+    return testing::Coverage(image, glm::vec3(renderer_->background()));
   }
 
   void ExpectMatchesReference(Projection projection, const char* name) {

@@ -11,6 +11,7 @@
 #include "shared/file_io.h"
 #include "shared/ply_io.h"
 #include "tests/common/run_command.h"
+#include "tests/render/render_test_support.h"
 #include "tests/render/test_spheres.h"
 
 namespace isostream::render {
@@ -24,19 +25,6 @@ namespace {
 std::string Temp(const std::string& name) {
   return ::testing::TempDir() + "render_mesh_tool_" +
          ::testing::UnitTest::GetInstance()->current_test_info()->name() + "_" + name;
-}
-
-// Fraction of pixels that differ from `background` by more than a rounding step.
-double Coverage(const Image& image, const uint8_t background[3]) {
-  size_t covered = 0;
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x) {
-      const uint8_t* p = image.pixel(x, y);
-      bool differs = false;
-      for (int c = 0; c < 3; ++c) differs |= std::abs(int(p[c]) - int(background[c])) > 2;
-      covered += differs;
-    }
-  return double(covered) / (double(image.width) * image.height);
 }
 
 class RenderMeshTool : public ::testing::Test {
@@ -56,10 +44,10 @@ TEST_F(RenderMeshTool, DrawsTheMeshAtTheGivenSizeAndBackground) {
   ASSERT_TRUE(image.ok()) << image.status();
   EXPECT_EQ(image->width, 120);
   EXPECT_EQ(image->height, 90);
-  const uint8_t white[3] = {255, 255, 255};
+  const glm::vec3 white(1.0f);
   // Framed to the bounding sphere: the spheres fill a good part of the picture, not all of it.
-  EXPECT_GT(Coverage(*image, white), 0.2);
-  EXPECT_LT(Coverage(*image, white), 0.9);
+  EXPECT_GT(testing::Coverage(*image, white), 0.2);
+  EXPECT_LT(testing::Coverage(*image, white), 0.9);
 
   // A black background, seen orthographically: the corners keep it, the centre does not.
   const std::string black_png = Temp("black.png");
