@@ -144,12 +144,13 @@ absl::Status CheckWorldBox(const std::array<int, 3>& dims, const std::array<doub
   static const char* const kAxis[3] = {"x", "y", "z"};
   for (int a = 0; a < 3; ++a) {
     const double s = spacing[a], lo = origin[a], hi = lo + s * (dims[a] - 1);
+    char text[96];
     if (!(s >= 1 / kMaxWorldCoordinate && s <= kMaxWorldCoordinate)) {
-      return absl::InvalidArgumentError(where + ": " + kAxis[a] + " spacing " + std::to_string(s) +
-                                        " is outside [1e-30, 1e30]");
+      // %g: std::to_string showed a spacing of 1e-35 as 0.000000 and 3e38 as 39 digits.
+      std::snprintf(text, sizeof(text), "%s spacing %g", kAxis[a], s);
+      return absl::InvalidArgumentError(where + ": " + text + " is outside [1e-30, 1e30]");
     }
     if (!(std::fabs(lo) <= kMaxWorldCoordinate && std::fabs(hi) <= kMaxWorldCoordinate)) {
-      char text[96];
       std::snprintf(text, sizeof(text), "%s extent [%g, %g]", kAxis[a], lo, hi);
       return absl::InvalidArgumentError(where + ": " + text + " is outside +-1e30 world units");
     }
