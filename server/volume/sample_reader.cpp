@@ -154,6 +154,13 @@ absl::Status CheckWorldBox(const std::array<int, 3>& dims, const std::array<doub
       std::snprintf(text, sizeof(text), "%s extent [%g, %g]", kAxis[a], lo, hi);
       return absl::InvalidArgumentError(where + ": " + text + " is outside +-1e30 world units");
     }
+    const double far = std::max(std::fabs(lo), std::fabs(hi));
+    if (s < far * kMinCellFloatSteps * 0x1p-23) {  // a float's step at x is at most x * 2^-23
+      std::snprintf(text, sizeof(text), "%s spacing %g at coordinates up to %g", kAxis[a], s, far);
+      return absl::InvalidArgumentError(
+          where + ": " + text + " cannot be told apart in single-precision positions (fewer than " +
+          std::to_string(kMinCellFloatSteps) + " float steps per cell)");
+    }
   }
   return absl::OkStatus();
 }

@@ -32,8 +32,12 @@ absl::Status CheckDims(const std::array<int64_t, 3>& dims, const VolumeLimits& l
 // InvalidArgument unless the world box of DIMS samples at SPACING from ORIGIN lies within
 // +-kMaxWorldCoordinate and every spacing within [1 / kMaxWorldCoordinate, kMaxWorldCoordinate]:
 // mesh positions are single precision, and a box past that range would overflow them (or the
-// view placed around it) downstream. Messages start with WHERE.
+// view placed around it) downstream. Also InvalidArgument where a cell spans fewer than
+// kMinCellFloatSteps floats at the box's largest coordinate (an origin of 1e17 with unit
+// spacing put every vertex at the same position): geodetic coordinates, ~6e6 m at 12.5 m
+// spacing, keep ~25. Messages start with WHERE.
 inline constexpr double kMaxWorldCoordinate = 1e30;
+inline constexpr int kMinCellFloatSteps = 8;
 absl::Status CheckWorldBox(const std::array<int, 3>& dims, const std::array<double, 3>& spacing,
                            const std::array<double, 3>& origin, const std::string& where);
 

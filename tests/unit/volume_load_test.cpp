@@ -562,6 +562,28 @@ TEST(VolumeLoadNifti, TinyAndHugeSpacing) {
   ExpectError(LoadVolume(wide), absl::StatusCode::kInvalidArgument, "wide.nii", "x extent");
 }
 
+// Positions are single precision: a box far from the origin loads only while its cells stay
+// several float steps wide. An origin of 1e17 with unit spacing once loaded and put every
+// vertex at one point.
+TEST(VolumeLoadNifti, OriginFarFromZero) {
+  NiftiFile nf;
+  nf.sform_code = 1;
+  nf.pixdim = {12.5f, 12.5f, 12.5f};
+  nf.sform_offset = {5e5f, 6e6f, -3e3f};  // geodetic metres: ~25 float steps per cell
+  const std::string survey = ScratchPath("survey.nii");
+  WriteBytes(survey, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  absl::StatusOr<VolumePtr> v = LoadVolume(survey);
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->origin[1], 6e6);
+
+  nf.pixdim = {1, 1, 1};
+  nf.sform_offset = {0, 1e17f, 0};
+  const std::string far = ScratchPath("far.nii");
+  WriteBytes(far, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(far), absl::StatusCode::kInvalidArgument, "far.nii",
+              "y spacing 1 at coordinates up to 1e+17 cannot be told apart in single-precision");
+}
+
 TEST(VolumeLoadErrors, DimsBelowTwo) {
   NiftiFile nf;
   nf.dims = {4, 1, 4};
