@@ -12,60 +12,10 @@
 #include <string>
 #include <utility>
 
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
+#include "server/volume/row_stats.h"
 
 namespace isostream {
 namespace {
-
-// Min, max and "not finite" over rows of 8 floats, lane by lane (SSE2 where available: the
-// compare-select minimum is the same as the scalar one, NaN included), reduced at the end.
-struct RowStats {
-#ifdef __SSE2__
-  __m128 lo[2], hi[2], bad;
-  void Reset(float l, float h) {
-    lo[0] = lo[1] = _mm_set1_ps(l);
-    hi[0] = hi[1] = _mm_set1_ps(h);
-    bad = _mm_setzero_ps();
-  }
-  void Add(const float* row) {
-    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-    const __m128 largest = _mm_set1_ps(FLT_MAX);
-    for (int half = 0; half < 2; ++half) {
-      const __m128 v = _mm_loadu_ps(row + 4 * half);
-      lo[half] = _mm_min_ps(v, lo[half]);  // v < lo ? v : lo
-      hi[half] = _mm_max_ps(v, hi[half]);  // v > hi ? v : hi
-      bad = _mm_or_ps(bad, _mm_cmpnle_ps(_mm_and_ps(v, abs_mask), largest));  // NaN too
-    }
-  }
-  void Finish(float* l, float* h, bool* any_bad) const {
-    float lanes_lo[8], lanes_hi[8];
-    _mm_storeu_ps(lanes_lo, lo[0]), _mm_storeu_ps(lanes_lo + 4, lo[1]);
-    _mm_storeu_ps(lanes_hi, hi[0]), _mm_storeu_ps(lanes_hi + 4, hi[1]);
-    for (int i = 0; i < 8; ++i) *l = std::min(*l, lanes_lo[i]), *h = std::max(*h, lanes_hi[i]);
-    *any_bad |= _mm_movemask_ps(bad) != 0;
-  }
-#else
-  float lo[8], hi[8];
-  bool bad;
-  void Reset(float l, float h) {
-    for (int i = 0; i < 8; ++i) lo[i] = l, hi[i] = h;
-    bad = false;
-  }
-  void Add(const float* row) {
-    for (int i = 0; i < 8; ++i) {
-      lo[i] = row[i] < lo[i] ? row[i] : lo[i];
-      hi[i] = row[i] > hi[i] ? row[i] : hi[i];
-      bad |= !(std::fabs(row[i]) <= FLT_MAX);
-    }
-  }
-  void Finish(float* l, float* h, bool* any_bad) const {
-    for (int i = 0; i < 8; ++i) *l = std::min(*l, lo[i]), *h = std::max(*h, hi[i]);
-    *any_bad |= bad;
-  }
-#endif
-};
 
 using LeafT = openvdb::FloatTree::LeafNodeType;
 static_assert(LeafT::DIM == kSlabDepth, "slabs must be exactly one leaf deep");
@@ -143,7 +93,7 @@ absl::Status DenseGridBuilder::AddSlab(int slab, const float* values) {
         // Whole rows (all but the volume's last leaf column): the transpose with constant
         // strides, and the statistics of a row at once, instead of a scalar min, max and
         // range test per sample (19 instructions per sample before).
-        RowStats stats_x;
+        volume_internal::RowStats stats_x;
         stats_x.Reset(lo, hi);
         for (int z = 0; z < nz; ++z) {
           for (int y = 0; y < wy; ++y) {
