@@ -13,8 +13,10 @@
 
 #include "client/net/session_client.h"
 #include "client/render/image.h"
+#include "client/render/mesh_renderer.h"
 #include "daemon_process.h"
 #include "misbehaving_server.h"
+#include "tests/common/image_coverage.h"
 #include "tests/common/run_command.h"
 
 namespace isostream {
@@ -27,15 +29,9 @@ ViewRun View(const std::string& args, bool no_display = false) {
                              ISOSTREAM_VIEW_PATH + " " + args);
 }
 
-// Fraction of pixels that are not the (white) background.
+// The viewer draws on the renderer's default background.
 double Coverage(const render::Image& image) {
-  size_t covered = 0;
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x) {
-      const uint8_t* p = image.pixel(x, y);
-      covered += p[0] < 240 || p[1] < 240 || p[2] < 240;
-    }
-  return double(covered) / (double(image.width) * image.height);
+  return testing::Coverage(image, glm::vec3(render::kDefaultBackground));
 }
 
 TEST(View, RendersStreamedFramesAndFailsClearly) {

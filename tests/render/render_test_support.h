@@ -4,7 +4,6 @@
 
 #include <gtest/gtest.h>
 
-#include <cmath>
 #include <cstdlib>
 #include <glm/vec3.hpp>
 #include <memory>
@@ -13,6 +12,7 @@
 #include "client/render/headless_context.h"
 #include "client/render/image.h"
 #include "client/render/mesh_renderer.h"
+#include "tests/common/image_coverage.h"
 
 namespace isostream::render::testing {
 
@@ -51,21 +51,7 @@ class RenderTest : public ::testing::Test {
   static inline MeshRenderer* renderer_ = nullptr;
 };
 
-// Fraction of pixels that differ from `background` (0..1 per channel) by more than a rounding
-// step in some channel: how much of a picture a mesh covers.
-inline double Coverage(const Image& image, const glm::vec3& background) {
-  size_t covered = 0;
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x) {
-      const uint8_t* p = image.pixel(x, y);
-      for (int c = 0; c < 3; ++c)
-        if (std::abs(int(p[c]) - int(std::lround(background[c] * 255.0f))) > 2) {
-          ++covered;
-          break;
-        }
-    }
-  return double(covered) / (double(image.width) * image.height);
-}
+using isostream::testing::Coverage;
 
 // Writes `image` as <ISOSTREAM_RENDER_TEST_OUT>/<name>.png when that variable is set, so the
 // pictures behind a golden test can be inspected; does nothing otherwise.
