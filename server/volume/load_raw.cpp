@@ -32,25 +32,21 @@ absl::StatusOr<VolumePtr> LoadRawSpec(std::string_view spec, const VolumeLimits&
     rest = rest.substr(0, colon);
     return true;
   };
-  std::string_view last, type_name, dims_text;
-  if (!pop(&last)) return malformed("missing fields");
-  bool big_endian = false;
-  SampleType parsed;
-  if (last == "le" || last == "be") {
-    big_endian = last == "be";
-    if (!pop(&type_name)) return malformed("missing fields");
-  } else if (!ParseSampleType(last, &parsed) && pop(&type_name)) {
-    // Not a type: a byte order field if a type precedes it, else a wrong type.
-    if (!ParseSampleType(type_name, &parsed)) {
-      rest = std::string_view(spec).substr(4, rest.size() + 1 + type_name.size());
-      type_name = last;
-    } else {
+  std::string_view last, before_last;
+  if (!pop(&last) || !pop(&before_last)) return malformed("missing fields");
+  // Four fields when the last names a byte order, or when the one before it names a type (the
+  // last is then a wrong byte order, not a wrong type).
+  SampleType ignored;
+  const bool order_given = last == "le" || last == "be" || ParseSampleType(before_last, &ignored);
+  std::string_view type_name = last, dims_text = before_last;
+  if (order_given) {
+    if (last != "le" && last != "be") {
       return malformed("byte order '" + std::string(last) + "' is not le or be");
     }
-  } else {
-    type_name = last;
+    type_name = before_last;
+    if (!pop(&dims_text)) return malformed("missing fields");
   }
-  if (!pop(&dims_text)) return malformed("missing fields");
+  const bool big_endian = last == "be";
   const std::string path(rest);
   if (path.empty()) return malformed("empty PATH");
 

@@ -778,6 +778,20 @@ TEST(VolumeLoadErrors, MalformedRawSpecs) {
   }
   ExpectError(LoadVolume("raw::2x2x2:uint8"), absl::StatusCode::kInvalidArgument, "raw::2x2x2");
   ASSERT_TRUE(LoadVolume("raw:" + path + ":2x2x2:uint8").ok());  // the file itself is fine
+  // A wrong last field after a type is a wrong byte order; with dims before it, a wrong type.
+  ExpectError(LoadVolume("raw:" + path + ":2x2x2:uint8:middle"),
+              absl::StatusCode::kInvalidArgument, "ok.raw", "byte order 'middle' is not le or be");
+  ExpectError(LoadVolume("raw:" + path + ":2x2x2:float"), absl::StatusCode::kInvalidArgument,
+              "ok.raw", "unsupported type 'float'");
+  ExpectError(LoadVolume("raw:" + path + ":2x2x2:float:be"), absl::StatusCode::kInvalidArgument,
+              "ok.raw", "unsupported type 'float'");
+  // PATH may hold colons: fields are taken from the right.
+  const std::string colons = ScratchPath("a:b:2x2x2:uint8.raw");
+  WriteBytes(colons, Samples(Type::kUint16, {2, 2, 2}, true));
+  absl::StatusOr<VolumePtr> v = LoadVolume("raw:" + colons + ":2x2x2:uint16:be");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->dims, (std::array<int, 3>{2, 2, 2}));
+  ExpectSamples(**v, [](int64_t i) { return float(StoredValue(Type::kUint16, i)); });
 }
 
 }  // namespace
