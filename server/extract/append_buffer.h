@@ -27,6 +27,7 @@ class AppendBuffer {
   T& operator[](size_t i) { return data_[i]; }
   const T& operator[](size_t i) const { return data_[i]; }
   void clear() { size_ = 0; }
+  void Shrink(size_t size) { size_ = size < size_ ? size : size_; }
 
  private:
   __attribute__((noinline)) void Grow(size_t needed) {  // rare: kept out of callers' frames

@@ -58,6 +58,7 @@ struct ExtractStats {
   int64_t leaves = 0;     // leaf tetrahedra that produced triangles
   int subtrees = 0;       // units of parallel work
   int budget_passes = 0;  // count-only traversals run to find eps for a budget
+  bool reordered = false;  // drawn from a retained cut (retained_cut.h), not extracted
   double budget_ms = 0, split_ms = 0, extract_ms = 0, join_ms = 0, total_ms = 0;
 };
 

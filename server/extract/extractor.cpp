@@ -24,7 +24,9 @@
 #include <optional>
 
 #include "server/extract/budget_search.h"
+#include "server/extract/retained_cut.h"
 #include "server/extract/traversal.h"
+#include "server/extract/view_context.h"
 
 namespace isostream {
 
@@ -90,23 +92,7 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.eps = eps > double(std::numeric_limits<float>::max()) ? std::numeric_limits<float>::infinity()
                                                           : static_cast<float>(eps);
   if (double(c.eps) < eps) c.eps = std::nextafter(c.eps, INFINITY);  // stop only if eta < eps
-  c.ordered = r.order == DrawOrder::kBackToFront;
-  c.orthographic = r.view.orthographic;
-  // Affine maps keep planes and sides: order in grid space with the eye mapped there.
-  c.eye = (r.view.eye - xf.origin) / xf.spacing;
-  glm::dvec3 d = r.view.direction;
-  const double eye_far = std::max({std::abs(c.eye.x), std::abs(c.eye.y), std::abs(c.eye.z)});
-  if (!c.orthographic && !(eye_far <= 0x1p52)) {
-    // So far that grid points' offsets from the eye are lost (or its grid coordinates
-    // overflow, and the plane sides would turn NaN): the volume is seen as from infinity,
-    // which is the orthographic view along the direction from the eye to it.
-    c.orthographic = true;
-    d = xf.origin + xf.spacing * (0.5 * double(1 << c.k)) - r.view.eye;
-  }
-  // Only the direction's sense matters: scaled to a largest component of 1 first, so a huge
-  // finite one (1e307) cannot overflow to inf, and 0 * inf to NaN, on the way to grid space.
-  const double d_max = std::max({std::abs(d.x), std::abs(d.y), std::abs(d.z)});
-  c.dir = d_max > 0 ? (d / d_max) / xf.spacing : d;
+  extract_internal::SetView(&c, xf, r.view, r.order);
   c.normals = r.normals;
   c.xf = xf;
   c.world_origin = glm::vec3(xf.origin);
@@ -116,38 +102,58 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.blocks = &BlockTables::Get();
   c.block_level = r.blocks ? 3 * c.k - kBlockDepth : -1;
   c.cases = &MarchingTets::Get();
-  for (int i = 0; i < kNumTetClasses; ++i) {
-    const ReferenceTet& rt = (*c.tables)[TetClass{uint8_t(i)}];
-    c.negative[i] = rt.left_handed;
-    const auto& ni = rt.plane_normal_int;
-    const glm::dvec3 n(ni[0], ni[1], ni[2]);
-    unsigned plus = 0, minus = 0;
-    for (int a = 0; a < 3; ++a) {
-      if (ni[a] == 1) plus |= 1u << a;
-      if (ni[a] == -1) minus |= 1u << a;
-    }
-    c.plane_plus[i] = extract_internal::FieldSumMultiplier(plus);
-    c.plane_minus[i] = extract_internal::FieldSumMultiplier(minus);
-    // normal . x >= normal . eye, for an integer left side: >= its ceiling. Past +-2^40 (far
-    // beyond any grid's |normal . x| < 2^15) the answer is the same for every x: never or
-    // always. Not a number (an eye whose grid coordinates overflow): never.
-    const double eye_side = glm::dot(n, c.eye);
-    constexpr double kFar = 1099511627776.0;  // 2^40
-    c.plane_at_least[i] = !(eye_side <= kFar) ? std::numeric_limits<int64_t>::max()
-                          : eye_side < -kFar  ? std::numeric_limits<int64_t>::min()
-                                              : int64_t(std::ceil(eye_side));
-    c.ortho_child0_first[i] = glm::dot(n, c.dir) >= 0;  // eye on child 1's side of every plane
-  }
+  for (int i = 0; i < kNumTetClasses; ++i) c.negative[i] = (*c.tables)[TetClass{uint8_t(i)}].left_handed;
   for (int level = 0; level <= 3 * c.k; ++level)
     c.inv_unit[level] = 2.0 / double((1 << c.k) >> (level / 3));
   return c;
 }
 
+// The refinements SplitIntoSubtrees makes above the subtrees, kept when the frame is retained:
+// replayed as a preorder walk, in the split's draw order, around the subtrees' own records.
+struct TopTree {
+  struct Entry {
+    extract_internal::PackedPoint x = 0;  // refinement vertex, once refined
+    TetClass cls;
+    bool child0_first = false;
+    int kids[2] = {-1, -1};  // in draw order, once refined
+    int item = -1;           // the subtree it became
+  };
+  struct Event {
+    enum Kind : uint8_t { kRootBegin, kRootEnd, kRefine, kSecond, kItem };
+    Kind kind;
+    int arg;  // kRoot*: initial tetrahedron; kRefine, kSecond: entry; kItem: subtree
+  };
+  std::vector<Entry> entries;
+  std::vector<std::pair<int, int>> roots;  // (initial tetrahedron, entry) in draw order
+  std::vector<Event> events;
+
+  void Walk() {
+    for (const auto& [initial, entry] : roots) {
+      events.push_back({Event::kRootBegin, initial});
+      Visit(entry);
+      events.push_back({Event::kRootEnd, initial});
+    }
+  }
+  void Visit(int e) {
+    const Entry& n = entries[e];
+    if (n.kids[0] >= 0) {
+      events.push_back({Event::kRefine, e});
+      Visit(n.kids[0]);
+      events.push_back({Event::kSecond, e});
+      Visit(n.kids[1]);
+    } else if (n.item >= 0) {
+      events.push_back({Event::kItem, n.item});
+    }
+  }
+};
+
 // Cuts the top of the tree into subtrees in draw order. Deterministic (independent of the
 // thread count) so the output is too. With a curve (a count pass that gathers one), the nodes
 // refined here add their share to it as the traversal's do, and pass their eta caps down.
+// With `top`, the refinements are recorded there too.
 std::vector<Node> SplitIntoSubtrees(const Context& c,
-                                    extract_internal::CountCurve* curve = nullptr) {
+                                    extract_internal::CountCurve* curve = nullptr,
+                                    TopTree* top = nullptr) {
   const ReferenceTets& tables = *c.tables;
   const int size = 1 << c.k;
   int order[kNumInitialTets];
@@ -157,6 +163,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c,
     std::iota(order, order + kNumInitialTets, 0);
   }
   std::vector<Node> items;
+  std::vector<int> ids;  // items' entries in *top
   for (int i : order) {
     Node t;
     const TetVertices v = InitialVertices(tables, i, size);
@@ -180,13 +187,20 @@ std::vector<Node> SplitIntoSubtrees(const Context& c,
     t.child0_first = extract_internal::ChildZeroFirst(c, t.cls, x);
     t.eta_cap = kInfiniteEtaCode;
     items.push_back(t);
+    if (top) {
+      ids.push_back(int(top->entries.size()));
+      top->roots.push_back({i, ids.back()});
+      top->entries.emplace_back();
+    }
   }
   constexpr size_t kTargetSubtrees = 256;
   constexpr int kMaxSplitLevel = 15;
   for (int level = 0; level < kMaxSplitLevel && items.size() < kTargetSubtrees; ++level) {
     std::vector<Node> next;
+    std::vector<int> next_ids;
     bool refined = false;
-    for (const Node& t : items) {
+    for (size_t j = 0; j < items.size(); ++j) {
+      const Node& t = items[j];
       const Decision d = Decide(c, t);
       if (d == Decision::kCull) {
         if (curve && t.level < 3 * c.k)  // as the traversal does
@@ -195,10 +209,22 @@ std::vector<Node> SplitIntoSubtrees(const Context& c,
       }
       if (d == Decision::kLeaf) {
         next.push_back(t);
+        if (top) next_ids.push_back(ids[j]);
         continue;
       }
       Node kids[2];
       extract_internal::Bisect(c, t, &kids[0], &kids[1]);
+      if (top) {
+        const int e = ids[j], kid = int(top->entries.size());
+        top->entries.resize(kid + 2);
+        TopTree::Entry& n = top->entries[e];
+        n.x = (t.v[0] + t.v[3]) >> 1;
+        n.cls = t.cls;
+        n.child0_first = t.child0_first;
+        n.kids[0] = kid, n.kids[1] = kid + 1;
+        next_ids.push_back(kid);
+        next_ids.push_back(kid + 1);
+      }
       if (curve) {
         const uint32_t code = extract_internal::EtaCode(c, t);
         curve->Add(code + 1, t.eta_cap, extract_internal::LeafTriangles(c, t));
@@ -209,7 +235,12 @@ std::vector<Node> SplitIntoSubtrees(const Context& c,
       refined = true;
     }
     items.swap(next);
+    ids.swap(next_ids);
     if (!refined) break;
+  }
+  if (top) {
+    for (size_t i = 0; i < items.size(); ++i) top->entries[ids[i]].item = int(i);
+    top->Walk();
   }
   return items;
 }
@@ -298,7 +329,9 @@ absl::StatusOr<std::vector<int64_t>> CountTrianglesPerEtaCode(const Hierarchy& h
 }
 
 absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
-                                      const ExtractRequest& r, const ExtractObserver* observer) {
+                                      const ExtractRequest& r, const ExtractObserver* observer,
+                                      RetainedCut* retain) {
+  if (retain) *retain = RetainedCut();
   ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
   const auto t_start = std::chrono::steady_clock::now();
   ExtractResult result;
@@ -346,7 +379,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   const Context c = MakeContext(h, xf, r, eps);
 
   auto t0 = std::chrono::steady_clock::now();
-  const std::vector<Node> items = SplitIntoSubtrees(c);
+  TopTree top;
+  const std::vector<Node> items = SplitIntoSubtrees(c, nullptr, retain ? &top : nullptr);
   st.split_ms = Ms(t0);
   st.subtrees = int(items.size());
 
@@ -383,6 +417,39 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   }
   double join_ms = 0;
   size_t appended = 0;  // parts
+
+  // Retaining: the top's records up to subtree `item` (to the end for -1), then the
+  // subtree's own, in preorder.
+  size_t next_event = 0;
+  std::vector<uint32_t> top_record(top.entries.size());
+  auto record_top = [&](int item) {
+    extract_internal::CutPart& cut = retain->cut_;
+    for (; next_event < top.events.size(); ++next_event) {
+      const TopTree::Event& e = top.events[next_event];
+      switch (e.kind) {
+        case TopTree::Event::kRootBegin:
+          retain->root_begin_[e.arg] = uint32_t(cut.records.size());
+          break;
+        case TopTree::Event::kRootEnd:
+          retain->root_end_[e.arg] = uint32_t(cut.records.size());
+          break;
+        case TopTree::Event::kRefine: {
+          const TopTree::Entry& n = top.entries[e.arg];
+          top_record[e.arg] = cut.AddRefine(n.x, n.cls, n.child0_first);
+          break;
+        }
+        case TopTree::Event::kSecond:
+          cut.SecondChildStarts(top_record[e.arg]);
+          break;
+        case TopTree::Event::kItem:
+          if (e.arg == item) {
+            ++next_event;
+            return;
+          }
+          break;  // not reached: subtrees are appended in draw order
+      }
+    }
+  };
 
   // Without a reservation (an eps request) the arrays would grow by doubling, ~9 times from
   // the first part to a 1 M-triangle frame, copying about the frame once more. Once a 16th of
@@ -436,6 +503,10 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       *it = to_global[*it];
     m.surface.insert(m.surface.end(), part.surface.data(),
                      part.surface.data() + part.surface.size());
+    if (retain) {
+      record_top(int(appended));
+      retain->cut_.Append(part.cut, uint32_t(first));
+    }
     ++appended;
     st.tets_visited += part.visited;
     st.leaves += part.leaves;
@@ -460,8 +531,11 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
               return;
             }
             std::unique_ptr<SubtreeMesh> part = pool.Acquire();
-            Traverser<true> t(c, &table, part.get());
-            t.Run(items[i]);
+            if (retain) {
+              Traverser<true, true>(c, &table, part.get(), nullptr, &part->cut).Run(items[i]);
+            } else {
+              Traverser<true>(c, &table, part.get()).Run(items[i]);
+            }
             std::lock_guard<std::mutex> lock(mu);
             parts[i] = std::move(part);
             done[i] = 1;
@@ -473,13 +547,30 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
         },
         tbb::simple_partitioner());
   });
-  if (halted) return StopReason(observer);
+  if (halted) {
+    if (retain) *retain = RetainedCut();
+    return StopReason(observer);
+  }
   st.extract_ms = Ms(t0) - join_ms;
   st.join_ms = join_ms;
 
   st.triangles = int64_t(m.triangle_count());
   st.vertices = int64_t(m.vertex_count());
   for (uint8_t s : m.surface) ++st.triangles_per_surface[s];
+  if (retain) {
+    record_top(-1);
+    RetainedCut& cut = *retain;
+    cut.isovalues_ = r.isovalues;
+    cut.eps_ = eps;
+    cut.budget_ = r.budget;
+    cut.normals_ = r.normals;
+    cut.k_ = h.k();
+    cut.xf_ = xf;
+    cut.iso_count_ = c.iso_count;
+    std::copy(c.iso, c.iso + c.iso_count, cut.iso_);
+    cut.leaves_ = st.leaves;
+    cut.mesh_ = m;
+  }
   st.total_ms = Ms(t_start);
   return result;
 }

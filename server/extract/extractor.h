@@ -38,10 +38,14 @@ struct ExtractObserver {
   std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
 };
 
+class RetainedCut;
+
 // The one-call form. `xf` places the hierarchy cube in world space (volume spacing, origin).
+// With `retain`, the frame is also kept there for other views (retained_cut.h).
 absl::StatusOr<ExtractResult> Extract(const Hierarchy& hierarchy, const GridToWorld& xf,
                                       const ExtractRequest& request,
-                                      const ExtractObserver* observer = nullptr);
+                                      const ExtractObserver* observer = nullptr,
+                                      RetainedCut* retain = nullptr);
 
 // Triangle count at a given eps without building the mesh; stops counting past `limit` and
 // then returns limit + 1.

@@ -12,6 +12,7 @@
 #include <limits>
 
 #include "server/extract/block_sets.h"
+#include "server/extract/cut_recorder.h"
 #include "server/extract/edge_vertex_table.h"
 #include "server/extract/subtree_mesh.h"
 #include "server/extract/tree_node.h"
@@ -49,14 +50,16 @@ struct RootFaces {
 // endpoints; 3 fields of 21 bits leave the top bit clear, and the surface goes below.
 inline uint64_t EdgeKey(PackedPoint mid2, int s) { return (mid2 << 4) | uint64_t(s); }
 
-// Emits the leaves of one subtree into `out` (kEmit), or only counts their triangles.
-template <bool kEmit>
+// Emits the leaves of one subtree into `out` (kEmit), or only counts their triangles; with
+// kRecord (emitting only) also records them into a CutPart.
+template <bool kEmit, bool kRecord = false>
 class LeafEmitter {
  public:
   using GradientFn = glm::dvec3 (*)(const void* state);
 
-  LeafEmitter(const Context& c, EdgeVertexTable* table, SubtreeMesh* out)
-      : c_(c), table_(table), out_(out) {}
+  // kRecord: every leaf that emits triangles is recorded in `cut` too (cut_recorder.h).
+  LeafEmitter(const Context& c, EdgeVertexTable* table, SubtreeMesh* out, CutPart* cut = nullptr)
+      : c_(c), table_(table), out_(out), cut_(cut) {}
 
   // A new subtree: vertices on its root's faces are the ones the join may merge.
   void BeginSubtree(const Node& root) {
@@ -86,7 +89,13 @@ class LeafEmitter {
 
   int Components(const Node& t, int first, int last) {
     if (kEmit) ++out_->leaves;
-    if (last - first == 1) return Component(t, first);
+    if (last - first == 1) {
+      if constexpr (!kEmit || !kRecord) return Component(t, first);
+      const size_t before = out_->surface.size();
+      const int n = Component(t, first);
+      cut_->AddLeaf(uint32_t(before), uint32_t(out_->surface.size() - before));
+      return n;
+    }
     int order[kMaxSurfaces], count = 0;
     if (!c_.ordered) {
       for (int i = first; i < last; ++i) order[count++] = i;
@@ -102,7 +111,27 @@ class LeafEmitter {
       for (int i = first; i < split; ++i) order[count++] = i;
     }
     int triangles = 0;
-    for (int j = 0; j < count; ++j) triangles += Component(t, order[j]);
+    if constexpr (!kEmit || !kRecord) {
+      for (int j = 0; j < count; ++j) triangles += Component(t, order[j]);
+      return triangles;
+    }
+    // Recorded with what orders the components for another view (the same expressions as
+    // above, so it decides as a fresh extraction would).
+    const MultiLeaf leaf{LeafGradient(t), t.v[0], t.f[0], uint32_t(cut_->components.size()),
+                         uint32_t(last - first)};
+    cut_->components.resize(leaf.first + leaf.count);
+    const size_t start = out_->surface.size();
+    for (int j = 0; j < count; ++j) {
+      const size_t before = out_->surface.size();
+      triangles += Component(t, order[j]);
+      cut_->components[leaf.first + (order[j] - first)] = {
+          uint32_t(before), uint32_t(out_->surface.size() - before), uint32_t(order[j])};
+    }
+    if (out_->surface.size() == start) {  // all clipped away
+      cut_->components.resize(leaf.first);
+    } else {
+      cut_->AddMultiLeaf(leaf);
+    }
     return triangles;
   }
 
@@ -326,6 +355,7 @@ class LeafEmitter {
   const Context& c_;
   EdgeVertexTable* table_;
   SubtreeMesh* out_;
+  CutPart* cut_;
   RootFaces faces_{TetVertices{}};
   GradientFn lazy_ = nullptr;  // set during Leaf for a node without its gradient
   const void* lazy_state_ = nullptr;

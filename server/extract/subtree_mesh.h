@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "server/extract/append_buffer.h"
+#include "server/extract/cut_recorder.h"
 
 namespace isostream::extract_internal {
 
@@ -24,6 +25,7 @@ struct SubtreeMesh {
   AppendBuffer<uint32_t> triangles;
   AppendBuffer<uint8_t> surface;
   std::vector<std::pair<uint32_t, uint64_t>> boundary;  // (local vertex, edge key)
+  CutPart cut;  // when the frame is retained (retained_cut.h)
   uint32_t vertices = 0;
   int64_t visited = 0;
   int64_t leaves = 0;
@@ -32,7 +34,8 @@ struct SubtreeMesh {
   size_t capacity_bytes() const {
     return (positions.capacity() + normals.capacity()) * sizeof(float) +
            triangles.capacity() * sizeof(uint32_t) + surface.capacity() +
-           boundary.capacity() * sizeof(boundary[0]);
+           boundary.capacity() * sizeof(boundary[0]) +
+           cut.records.capacity() * sizeof(CutRecord);
   }
   void clear() {
     positions.clear();
@@ -40,6 +43,7 @@ struct SubtreeMesh {
     triangles.clear();
     surface.clear();
     boundary.clear();
+    cut.clear();
     vertices = 0;
     visited = leaves = 0;
   }

@@ -33,12 +33,15 @@ namespace isostream::extract_internal {
 // Emits triangles (kEmit) or only counts them, for one subtree. A count pass may also gather
 // the count at every coarser eps into `curve` (count_curve.h); its context must have blocks off
 // (block_level -1), since the curve needs the eta of every node the blocks skip.
-template <bool kEmit>
+template <bool kEmit, bool kRecord = false>
 class Traverser {
+  static_assert(kEmit || !kRecord, "only an emitting traversal records");
  public:
+  // kRecord (emitting only): the refined nodes and the leaves are recorded in `cut` as well
+  // (cut_recorder.h).
   Traverser(const Context& c, EdgeVertexTable* table, SubtreeMesh* out,
-            CountCurve* curve = nullptr)
-      : c_(c), emit_(c, table, out), curve_(curve) {}
+            CountCurve* curve = nullptr, CutPart* cut = nullptr)
+      : c_(c), emit_(c, table, out, cut), curve_(curve), cut_(cut) {}
 
   // Returns the triangle count (stops early past `limit` when counting).
   int64_t Run(const Node& root, int64_t limit = INT64_MAX) {
@@ -47,6 +50,7 @@ class Traverser {
     // Depth first, far child first. The current node stays out of the stack: bisection writes
     // the far child into the spare slot and pushes only the near one.
     Node stack[3 * 16 + 4];
+    uint32_t second_of[3 * 16 + 4];  // recording: the refine record stack[i] is the second of
     Node slots[2];
     Node* cur = &slots[0];
     Node* spare = &slots[1];
@@ -64,6 +68,9 @@ class Traverser {
             break;
           }
           Bisect(c_, *cur, spare, &stack[top++]);
+          if constexpr (kRecord)
+            second_of[top - 1] =
+                cut_->AddRefine((cur->v[0] + cur->v[3]) >> 1, cur->cls, cur->child0_first);
           if (!kEmit && curve_) {
             // A leaf at the eta codes above its own, up to its nearest ancestor's.
             const uint32_t code = EtaCode(c_, *cur);
@@ -91,6 +98,7 @@ class Traverser {
       }
       if (top == 0) break;
       *cur = stack[--top];
+      if constexpr (kRecord) cut_->SecondChildStarts(second_of[top]);
     }
     emit_.AddVisited(visited);
     return triangles;
@@ -177,7 +185,11 @@ class Traverser {
       if (kDepth == 2 && c_.eps > 0 && c_.Eta(c_.EtaOffset(fr.p[b.refinement])) < c_.eps)
         return BlockLeaf(fr, at, kDepth);
       const unsigned far = 2 * at + ((fr.child1_first >> at) & 1);
+      uint32_t record = 0;
+      if constexpr (kRecord)
+        record = cut_->AddRefine(fr.p[b.refinement], b.cls, !((fr.child1_first >> at) & 1));
       const int64_t n = BlockVisit<kDepth + 1>(fr, far, visited);
+      if constexpr (kRecord) cut_->SecondChildStarts(record);
       return n + BlockVisit<kDepth + 1>(fr, far ^ 1, visited);
     }
   }
@@ -231,8 +243,9 @@ class Traverser {
   }
 
   const Context& c_;
-  LeafEmitter<kEmit> emit_;
+  LeafEmitter<kEmit, kRecord> emit_;
   CountCurve* curve_;
+  CutPart* cut_;
 };
 
 }  // namespace isostream::extract_internal

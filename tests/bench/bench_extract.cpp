@@ -1,17 +1,20 @@
 // Extraction speed: sorted (back-to-front) vs --order none, 1 vs 2 threads, blocks vs node by
-// node for the last three levels, the budget search (first view of a budget), and an
-// extract-then-sort baseline (same traversal unsorted, then std::sort by centroid depth).
+// node for the last three levels, the budget search (first view of a budget), an
+// extract-then-sort baseline (same traversal unsorted, then std::sort by centroid depth), and
+// the view change served from a retained cut (what recording it costs, and re-ordering it).
 //   build/tests/bench/bench_extract --benchmark_counters_tabular=true
 // Cases: cayley:513 iso 0 and -0.5,0,0.5; buckyball:513 iso .05,.15,.25, each at the eps that
 // gives about 1 M triangles; cayley:257 iso 0 at eps = 0.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <cmath>
 #include <glm/geometric.hpp>
 #include <map>
 #include <numeric>
 
 #include "server/extract/extractor.h"
+#include "server/extract/retained_cut.h"
 #include "server/hierarchy/hierarchy.h"
 #include "server/volume/load.h"
 #include "server/volume/padding.h"
@@ -175,6 +178,49 @@ void BM_BudgetSearch(benchmark::State& state) {
   state.counters["triangles"] = triangles;
 }
 
+// The frames of BM_Extract (1 thread, sorted) while also recording the cut for later views:
+// what retaining costs the first view. arg: case
+void BM_ExtractRetaining(benchmark::State& state) {
+  const Scene& scene = GetScene(int(state.range(0)));
+  ExtractRequest r = scene.request;
+  r.threads = 1;
+  int64_t triangles = 0;
+  double megabytes = 0;
+  RetainedCut cut;
+  for (auto _ : state) {
+    auto res = Extract(*scene.hierarchy, scene.xf, r, nullptr, &cut);
+    triangles = res->stats.triangles;
+    benchmark::DoNotOptimize(res);
+  }
+  megabytes = double(cut.memory_bytes()) / (1 << 20);
+  state.counters["cut_MiB"] = megabytes;
+  Report(state, triangles);
+}
+
+// A view change served from the cut retained at the case's view: the eye circles the volume,
+// 15 degrees per frame, and each frame is re-ordered (one thread) instead of extracted. arg:
+// case
+void BM_Reorder(benchmark::State& state) {
+  const Scene& scene = GetScene(int(state.range(0)));
+  ExtractRequest r = scene.request;
+  RetainedCut cut;
+  if (!Extract(*scene.hierarchy, scene.xf, r, nullptr, &cut).ok()) {
+    state.SkipWithError("extraction failed");
+    return;
+  }
+  int64_t triangles = 0, frame = 0;
+  for (auto _ : state) {
+    const double a = 0.2618 * double(frame++);
+    View view = r.view;
+    view.eye = {r.view.eye.x * std::cos(a) - r.view.eye.y * std::sin(a),
+                r.view.eye.x * std::sin(a) + r.view.eye.y * std::cos(a), r.view.eye.z};
+    auto res = Reorder(cut, view);
+    triangles = res->stats.triangles;
+    benchmark::DoNotOptimize(res);
+  }
+  Report(state, triangles);
+}
+
 void Args(benchmark::internal::Benchmark* b) {
   for (int c = 0; c < 4; ++c)
     for (int threads : {1, 2})
@@ -197,6 +243,13 @@ BENCHMARK(BM_ExtractThenSort)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->MinTime(1.0);
+
+BENCHMARK(BM_ExtractRetaining)
+    ->DenseRange(0, 3)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(1.0);
+BENCHMARK(BM_Reorder)->DenseRange(0, 3)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
 
 }  // namespace
 }  // namespace isostream

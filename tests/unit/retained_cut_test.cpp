@@ -1,0 +1,214 @@
+// A retained cut re-ordered for another view equals a fresh extraction for that view: the same
+// triangles, with the same vertex positions, normals and surfaces, in the same draw order.
+#include "server/extract/retained_cut.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "test_volumes.h"
+
+namespace isostream {
+namespace {
+
+using testing::BlobsField;
+using testing::CayleyField;
+using testing::SphereField;
+
+struct Case {
+  HierarchyPtr h;
+  std::vector<float> iso;
+  std::string name;
+};
+
+std::vector<Case> Volumes() {
+  std::vector<Case> v;
+  v.push_back({testing::MakeHierarchy(5, CayleyField), {-0.3f, 0.05f, 0.4f}, "cayley 33^3"});
+  v.push_back({testing::MakeHierarchy(5, BlobsField), {0.2f, 0.5f, 0.8f}, "blobs 33^3"});
+  v.push_back({testing::MakeHierarchy(4, SphereField), {0.6f}, "sphere 17^3"});
+  // Data box 13 x 17 x 11 in a 17^3 cube: clipped leaves.
+  PaddedSamples s = testing::MakeSamples(4, CayleyField);
+  s.data_dims = {13, 17, 11};
+  auto clipped = BuildHierarchy(std::move(s));
+  v.push_back({clipped.ok() ? *clipped : nullptr, {-0.3f, 0.05f, 0.4f}, "cayley clipped"});
+  return v;
+}
+
+// Triangle t of m as its corners' positions and normals and its surface, bit for bit.
+std::vector<float> Corners(const OrderedMesh& m, size_t t) {
+  std::vector<float> out;
+  for (int i = 0; i < 3; ++i) {
+    const size_t v = m.triangles[3 * t + i];
+    out.insert(out.end(), &m.positions[3 * v], &m.positions[3 * v] + 3);
+    out.insert(out.end(), &m.normals[3 * v], &m.normals[3 * v] + 3);
+  }
+  return out;
+}
+
+void ExpectSameDrawing(const OrderedMesh& fresh, const OrderedMesh& reordered,
+                       const std::string& what) {
+  ASSERT_EQ(fresh.triangle_count(), reordered.triangle_count()) << what;
+  ASSERT_EQ(fresh.vertex_count(), reordered.vertex_count()) << what;
+  for (size_t t = 0; t < fresh.triangle_count(); ++t) {
+    ASSERT_EQ(fresh.surface[t], reordered.surface[t]) << what << ", triangle " << t;
+    const std::vector<float> a = Corners(fresh, t), b = Corners(reordered, t);
+    ASSERT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0)
+        << what << ", triangle " << t;
+  }
+}
+
+View Perspective(glm::dvec3 eye) {
+  View v;
+  v.eye = eye;
+  return v;
+}
+View Orthographic(glm::dvec3 direction) {
+  View v;
+  v.orthographic = true;
+  v.direction = direction;
+  return v;
+}
+
+TEST(RetainedCut, ReorderedForAnotherViewEqualsAFreshExtraction) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(-1, 1);
+  int compared = 0, with_several_surfaces = 0;
+  for (const Case& vol : Volumes()) {
+    ASSERT_NE(vol.h, nullptr) << vol.name;
+    const Hierarchy& h = *vol.h;
+    const double n = h.n() - 1, half = n / 2;
+    const int mid = h.n() / 2;
+    for (double eps : {0.0, 0.05 * h.eta(mid, mid, mid)})
+      for (NormalMode normals : {NormalMode::kSmooth, NormalMode::kFlat})
+        for (bool blocks : {true, false}) {
+          ExtractRequest r;
+          r.isovalues = vol.iso;
+          r.eps = eps;
+          r.normals = normals;
+          r.blocks = blocks;
+          r.threads = 2;
+          r.view = Perspective({-0.7 * n, 2.1 * n, 1.3 * n});
+          RetainedCut cut;
+          auto first = Extract(h, GridToWorld{}, r, nullptr, &cut);
+          ASSERT_TRUE(first.ok()) << first.status();
+          ASSERT_GT(first->mesh.triangle_count(), 50u) << vol.name;
+          ASSERT_TRUE(cut.Serves(r));
+          // Eyes outside and inside the volume, on grid planes (ties of the plane tests),
+          // directions, and the unordered traversal.
+          std::vector<std::pair<View, DrawOrder>> views = {
+              {r.view, DrawOrder::kBackToFront},
+              {Perspective({half + 0.3, half - 0.2, 1.7}), DrawOrder::kBackToFront},
+              {Perspective({half, half, half}), DrawOrder::kBackToFront},
+              {Perspective({3.0 * n, -n, 0.5 * n}), DrawOrder::kBackToFront},
+              {Orthographic({0.3, -1.0, 0.2}), DrawOrder::kBackToFront},
+              {Orthographic({0, 0, 1}), DrawOrder::kBackToFront},
+              {Perspective({2 * n, 2 * n, 2 * n}), DrawOrder::kNone}};
+          for (int i = 0; i < 3; ++i)
+            views.push_back({Perspective({half + n * unit(rng), half + n * unit(rng),
+                                          half + n * unit(rng)}),
+                             DrawOrder::kBackToFront});
+          for (const auto& [view, order] : views) {
+            ExtractRequest fresh_request = r;
+            fresh_request.view = view;
+            fresh_request.order = order;
+            auto fresh = Extract(h, GridToWorld{}, fresh_request);
+            ASSERT_TRUE(fresh.ok()) << fresh.status();
+            auto reordered = Reorder(cut, view, order);
+            ASSERT_TRUE(reordered.ok()) << reordered.status();
+            EXPECT_TRUE(reordered->stats.reordered);
+            EXPECT_EQ(reordered->stats.eps_used, fresh->stats.eps_used);
+            EXPECT_EQ(reordered->stats.triangles_per_surface, fresh->stats.triangles_per_surface);
+            ExpectSameDrawing(fresh->mesh, reordered->mesh,
+                              vol.name + " eps " + std::to_string(eps) + " view " +
+                                  std::to_string(compared % views.size()));
+            ++compared;
+          }
+          if (vol.iso.size() > 1 && cut.memory_bytes() > 0) ++with_several_surfaces;
+        }
+  }
+  EXPECT_EQ(compared, 4 * 2 * 2 * 2 * 10);
+  EXPECT_GT(with_several_surfaces, 0);
+}
+
+// A view that orders the triangles differently: the test above compares something.
+TEST(RetainedCut, AnotherViewChangesTheOrder) {
+  const auto h = testing::MakeHierarchy(5, BlobsField);
+  ExtractRequest r;
+  r.isovalues = {0.2f, 0.5f, 0.8f};
+  r.view = Perspective({-30, 70, 40});
+  RetainedCut cut;
+  auto a = Extract(*h, GridToWorld{}, r, nullptr, &cut);
+  ASSERT_TRUE(a.ok());
+  auto b = Reorder(cut, Perspective({70, -30, -20}));
+  ASSERT_TRUE(b.ok());
+  ASSERT_EQ(a->mesh.triangle_count(), b->mesh.triangle_count());
+  size_t moved = 0;
+  for (size_t t = 0; t < a->mesh.triangle_count(); ++t) moved += Corners(a->mesh, t) != Corners(b->mesh, t);
+  EXPECT_GT(moved, a->mesh.triangle_count() / 2);
+}
+
+TEST(RetainedCut, ServesOnlyTheSameMesh) {
+  const auto h = testing::MakeHierarchy(4, SphereField);
+  ExtractRequest r;
+  r.isovalues = {0.5f, 0.7f};
+  r.eps = 0.01;
+  r.view = Perspective({40, 40, 40});
+  RetainedCut cut;
+  EXPECT_FALSE(cut.Serves(r));  // nothing retained yet
+  ASSERT_TRUE(Extract(*h, GridToWorld{}, r, nullptr, &cut).ok());
+  EXPECT_TRUE(cut.Serves(r));
+  ExtractRequest other = r;
+  other.eps = 0.02;
+  EXPECT_FALSE(cut.Serves(other));
+  other = r;
+  other.isovalues = {0.7f, 0.5f};  // surfaces numbered otherwise
+  EXPECT_FALSE(cut.Serves(other));
+  other = r;
+  other.normals = NormalMode::kFlat;
+  EXPECT_FALSE(cut.Serves(other));
+  other = r;
+  other.budget = 500;
+  EXPECT_FALSE(cut.Serves(other));
+  EXPECT_TRUE(cut.Serves(other, 0.01));  // a budget whose remembered eps is the cut's
+
+  // A budget request is served by a cut of the same budget.
+  ExtractRequest budget = r;
+  budget.budget = 300;
+  ASSERT_TRUE(Extract(*h, GridToWorld{}, budget, nullptr, &cut).ok());
+  EXPECT_TRUE(cut.Serves(budget));
+  EXPECT_FALSE(cut.Serves(r));
+}
+
+TEST(RetainedCut, BadViewsAndStoppedExtractionsGiveClearErrors) {
+  const auto h = testing::MakeHierarchy(4, SphereField);
+  ExtractRequest r;
+  r.isovalues = {0.5f};
+  r.view = Perspective({40, 40, 40});
+  RetainedCut cut;
+  auto none = Reorder(cut, r.view);
+  EXPECT_EQ(none.status().code(), absl::StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(Extract(*h, GridToWorld{}, r, nullptr, &cut).ok());
+  auto zero = Reorder(cut, Orthographic({0, 0, 0}));
+  EXPECT_EQ(zero.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(zero.status().message().find("view direction is zero"), std::string::npos);
+  auto nan = Reorder(cut, Perspective({std::nan(""), 0, 0}));
+  EXPECT_EQ(nan.status().code(), absl::StatusCode::kInvalidArgument);
+
+  std::atomic<bool> cancel{true};
+  ExtractObserver observer;
+  observer.cancel = &cancel;
+  auto cancelled = Reorder(cut, r.view, DrawOrder::kBackToFront, &observer);
+  EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
+  // An extraction that stops keeps nothing.
+  auto stopped = Extract(*h, GridToWorld{}, r, &observer, &cut);
+  EXPECT_EQ(stopped.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_FALSE(cut.Serves(r));
+  EXPECT_EQ(Reorder(cut, r.view).status().code(), absl::StatusCode::kFailedPrecondition);
+}
+
+}  // namespace
+}  // namespace isostream
