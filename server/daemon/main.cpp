@@ -121,7 +121,8 @@ int main(int argc, char** argv) {
   std::string config_file, listen, cache_dir, tls_cert, tls_key, token, log_level;
   std::vector<std::string> volumes;
   int threads = 0, max_sessions = 0, max_isovalues = 0, max_dim = 0, chunk_triangles = 0;
-  int64_t max_triangles = 0, deadline_ms = 0, idle_timeout_s = 0, cache_max_mb = 0;
+  int64_t max_triangles = 0, deadline_ms = 0, idle_timeout_s = 0, cache_max_mb = 0,
+          retain_mb = 0;
   bool no_cache = false;
   app.add_option("--config", config_file, "JSON config file (flags override it)");
   auto* o_listen = app.add_option("--listen", listen,
@@ -158,6 +159,9 @@ int main(int argc, char** argv) {
                                "largest generator size served without a catalogue (default 257)");
   auto* o_chunk =
       app.add_option("--chunk-triangles", chunk_triangles, "triangles per chunk (default 65536)");
+  auto* o_retain = app.add_option("--retain-mb", retain_mb,
+                                  "memory for streams' last frames, re-ordered for new views of "
+                                  "the same mesh instead of extracted (default 1024; 0: off)");
   auto* o_log = app.add_option("--log-level", log_level, "trace|debug|info|warn|error");
   try {
     app.parse(argc, argv);
@@ -200,6 +204,7 @@ int main(int argc, char** argv) {
   if (*o_token) config.token = token;
   if (*o_dim) config.limits.max_dim = max_dim;
   if (*o_chunk) config.chunk_triangles = chunk_triangles;
+  if (*o_retain) config.retain_mb = retain_mb;
   if (*o_log) config.log_level = log_level;
   if (config.first_chunk_triangles > config.chunk_triangles)
     config.first_chunk_triangles = config.chunk_triangles;

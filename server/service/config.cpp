@@ -70,13 +70,16 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
   if (j.contains("frames")) {
     const json& f = j["frames"];
     ISOSTREAM_RETURN_IF_ERROR(CheckKeys(
-        f, {"chunk_triangles", "first_chunk_triangles", "coarse_triangles", "max_queued_chunks"},
+        f,
+        {"chunk_triangles", "first_chunk_triangles", "coarse_triangles", "max_queued_chunks",
+         "retain_mb"},
         "frames."));
     ISOSTREAM_RETURN_IF_ERROR(Get(f, "chunk_triangles", "frames.", &c->chunk_triangles));
     ISOSTREAM_RETURN_IF_ERROR(
         Get(f, "first_chunk_triangles", "frames.", &c->first_chunk_triangles));
     ISOSTREAM_RETURN_IF_ERROR(Get(f, "coarse_triangles", "frames.", &c->coarse_triangles));
     ISOSTREAM_RETURN_IF_ERROR(Get(f, "max_queued_chunks", "frames.", &c->max_queued_chunks));
+    ISOSTREAM_RETURN_IF_ERROR(Get(f, "retain_mb", "frames.", &c->retain_mb));
   }
   return absl::OkStatus();
 }
@@ -119,6 +122,8 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   if (c.coarse_triangles < 100) return bad("coarse_triangles must be at least 100");
   if (c.max_queued_chunks < 2 || c.max_queued_chunks > 256)
     return bad("max_queued_chunks must be in 2..256");
+  if (c.retain_mb < 0 || c.retain_mb > (int64_t{1} << 30))
+    return bad("retain_mb must be in 0 (off)..1073741824");
   for (const auto& [name, spec] : c.volumes)
     if (name.empty() || spec.empty()) return bad("catalogue names and specs must not be empty");
   return absl::OkStatus();

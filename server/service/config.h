@@ -43,6 +43,10 @@ struct DaemonConfig {
   int first_chunk_triangles = 8192;
   int coarse_triangles = 20000;  // budget of the coarse frame of a progressive request
   int max_queued_chunks = 8;     // per stream: encoded or encoding, not yet written
+  // Each stream keeps its last refined frame's cut, so a new view of the same mesh is
+  // re-ordered instead of extracted (~56 MB per 1 M triangles); all streams together keep at
+  // most this much (a frame that does not fit is not kept). 0: keep none.
+  int64_t retain_mb = 1024;
   int shutdown_grace_ms = 5000;  // how long SIGTERM waits for frames in flight
   std::string log_level = "info";
 };
@@ -55,7 +59,7 @@ struct DaemonConfig {
 //    "limits": {"max_sessions": 16, "max_triangles": 4000000, "max_isovalues": 16,
 //               "deadline_ms": 30000, "max_dim": 257, "idle_timeout_s": 300},
 //    "frames": {"chunk_triangles": 65536, "first_chunk_triangles": 8192,
-//               "coarse_triangles": 20000, "max_queued_chunks": 8},
+//               "coarse_triangles": 20000, "max_queued_chunks": 8, "retain_mb": 1024},
 //    "log_level": "info"}
 // Unknown keys and wrong types are errors naming the key.
 absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config);

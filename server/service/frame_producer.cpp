@@ -82,8 +82,10 @@ absl::StatusOr<ExtractRequest> ToExtractRequest(const pb::ViewRequest& v, const 
 absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewRequest& view,
                                 const ExtractRequest& request, uint64_t generation,
                                 std::atomic<bool>* cancel, ChunkSink* sink,
-                                Clock::time_point received, CoarseHint* hint) const {
-  if (view.progressive()) {
+                                Clock::time_point received, CoarseHint* hint,
+                                RetainedFrame* retained) const {
+  const bool reorders = retained && retained->Find(volume, request) != nullptr;
+  if (view.progressive() && !reorders) {
     const int64_t coarse = settings_.coarse_triangles;
     bool want_coarse;
     if (request.budget > 0) {
@@ -118,14 +120,16 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
     }
   }
   ExtractStats stats;
-  return ProduceFrame(volume, view, request, false, generation, cancel, sink, received, &stats);
+  return ProduceFrame(volume, view, request, false, generation, cancel, sink, received, &stats,
+                      retained);
 }
 
 absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
                                          const ExtractRequest& request, bool coarse,
                                          uint64_t generation, std::atomic<bool>* cancel,
                                          ChunkSink* sink, Clock::time_point received,
-                                         ExtractStats* stats_out) const {
+                                         ExtractStats* stats_out,
+                                         RetainedFrame* retained) const {
   counters_->frames_started.fetch_add(1);
   const auto deadline = received + std::chrono::milliseconds(settings_.deadline_ms);
   const bool raw = view.codec() == pb::RAW;
@@ -207,6 +211,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
       st->set_eps_used(stats->eps_used);
       st->set_extract_ms(stats->total_ms);
       st->set_budget_passes(stats->budget_passes);
+      st->set_reordered(stats->reordered);
       st->set_chunk_count(int32_t(index + 1));
     }
     cut_end += count;
@@ -269,8 +274,15 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
 
   ExtractRequest remembering = request;  // budget -> eps is the same for every view
   remembering.budget_memo = &volume.budget_memo;
-  auto result =
-      Extract(*volume.prepared.hierarchy, volume.prepared.grid_to_world, remembering, &observer);
+  const RetainedCut* same_mesh = retained ? retained->Find(volume, remembering) : nullptr;
+  RetainedCut fresh_cut;
+  const bool retain = retained && !same_mesh && retained->enabled();
+  auto result = same_mesh ? Reorder(*same_mesh, request.view, request.order, &observer)
+                          : Extract(*volume.prepared.hierarchy, volume.prepared.grid_to_world,
+                                    remembering, &observer, retain ? &fresh_cut : nullptr);
+  if (result.ok() && same_mesh) counters_->frames_reordered.fetch_add(1);
+  // Kept only whole: a frame stopped part way leaves the cut empty, and the one before stays.
+  if (result.ok() && retain && !fresh_cut.empty()) retained->Keep(volume, std::move(fresh_cut));
   bool last_cut = false;
   if (result.ok()) *stats_out = result->stats;
   if (result.ok() && !cancel->load() && wait_for_room()) {

@@ -22,6 +22,7 @@
 #include "server/extract/extractor.h"
 #include "server/service/catalogue.h"
 #include "server/service/config.h"
+#include "server/service/retained_frame.h"
 #include "server/service/stats.h"
 #include "server/service/worker_pool.h"
 
@@ -83,18 +84,20 @@ class FrameProducer {
   // itself to stop early. Returns OK, CANCELLED, DEADLINE_EXCEEDED (limits.deadline_ms),
   // RESOURCE_EXHAUSTED (a frame over max_triangles) or the extractor's error.
   // `hint` (may be null) is read and updated; one stream's views run one at a time, so it
-  // needs no lock.
+  // needs no lock. So is `retained` (may be null): a refined frame of the mesh it holds is
+  // re-ordered from it (no coarse frame first: the refined one comes as quickly), and any other
+  // refined frame replaces it.
   absl::Status Run(const ServedVolume& volume, const pb::ViewRequest& view,
                    const ExtractRequest& request, uint64_t generation, std::atomic<bool>* cancel,
                    ChunkSink* sink, std::chrono::steady_clock::time_point received,
-                   CoarseHint* hint = nullptr) const;
+                   CoarseHint* hint = nullptr, RetainedFrame* retained = nullptr) const;
 
  private:
   absl::Status ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
                             const ExtractRequest& request, bool coarse, uint64_t generation,
                             std::atomic<bool>* cancel, ChunkSink* sink,
                             std::chrono::steady_clock::time_point received,
-                            ExtractStats* stats_out) const;
+                            ExtractStats* stats_out, RetainedFrame* retained = nullptr) const;
 
   FrameSettings settings_;
   WorkerPool* encoders_;

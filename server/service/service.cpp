@@ -30,6 +30,7 @@ class StreamBase;
 struct ServiceCore {
   explicit ServiceCore(const DaemonConfig& c)
       : config(c),
+        retain_budget(c.retain_mb << 20),
         catalogue([&] {
           CatalogueOptions o;
           o.volumes = c.volumes;
@@ -120,6 +121,8 @@ struct ServiceCore {
 
   DaemonConfig config;
   ServerCounters counters;
+  // Streams' retained frames (declared before the pools: the last stream may go with them).
+  RetainBudget retain_budget;
   VolumeCatalogue catalogue;
   std::atomic<bool> shutting_down{false};
   std::mutex streams_mu;
@@ -497,7 +500,7 @@ class ChunkStream : public Reactor, public StreamBase {
     if (!volume.ok()) return volume.status();
     if (cancel->load()) return absl::CancelledError("superseded");
     return core_->producer.Run(**volume, view, request, generation, cancel, this, received,
-                               &coarse_hint_);
+                               &coarse_hint_, &retained_);
   }
 
   ServiceCore* core_;
@@ -507,6 +510,7 @@ class ChunkStream : public Reactor, public StreamBase {
   bool admitted_ = false;  // holds a session slot (set before any other thread sees the stream)
   bool idle_timeout_applies_ = false;  // Session streams, once admitted; under mu_
   CoarseHint coarse_hint_;             // used by the one running job only
+  RetainedFrame retained_{&core_->retain_budget};  // likewise
 
   mutable std::mutex mu_;
   std::deque<pb::FrameChunk> queue_;
@@ -753,6 +757,8 @@ pb::ServerStats IsostreamService::Stats() const {
   s.set_frames_started(c.frames_started.load());
   s.set_frames_sent(c.frames_sent.load());
   s.set_frames_cancelled(c.frames_cancelled.load());
+  s.set_frames_reordered(c.frames_reordered.load());
+  s.set_retained_bytes(core_->retain_budget.used());
   s.set_chunks_sent(c.chunks_sent.load());
   s.set_bytes_sent(c.bytes_sent.load());
   s.set_volumes_prepared(core_->catalogue.prepared_count());

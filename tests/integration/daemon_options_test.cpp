@@ -76,7 +76,8 @@ TEST_F(GuardedDaemon, SigtermFinishesTheFrameInFlightAndExitsZero) {
   EXPECT_TRUE(fetched.ok()) << fetched;
 }
 
-// A daemon with a JSON config: a catalogue (so generator specs are refused) and small chunks.
+// A daemon with a JSON config: a catalogue (so generator specs are refused), small chunks, and
+// no retained frames.
 class ConfiguredDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
@@ -86,7 +87,7 @@ class ConfiguredDaemon : public Daemon {
     std::ofstream(config)
         << R"({"threads": 2, "volumes": {"ball": "buckyball:65", "big": "buckyball:129"},
         "frames": {"chunk_triangles": 4096, "first_chunk_triangles": 1024,
-                   "max_queued_chunks": 4}})";
+                   "max_queued_chunks": 4, "retain_mb": 0}})";
     ASSERT_TRUE(daemon_->Start({"--config", config, "--cache-dir", scratch_->path() + "/cache"},
                                scratch_->path() + "/isostreamd.log"));
   }
@@ -110,6 +111,28 @@ TEST_F(ConfiguredDaemon, ServesItsCatalogueOnly) {
   EXPECT_EQ(sizes[0], 1024u);
   EXPECT_EQ(sizes[1], 2048u);
   for (size_t i = 2; i + 1 < sizes.size(); ++i) EXPECT_EQ(sizes[i], 4096u);
+}
+
+// With retain_mb 0 every view is extracted, the same mesh or not, and nothing is held.
+TEST_F(ConfiguredDaemon, RetainsNothingWhenItsBudgetIsZero) {
+  auto c = Connect();
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  net::Session& s = **session;
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_TRUE(s.Send(MakeView("ball", 40 + i, 0.003, glm::dvec3(2, 2 - 4 * i, 2))).ok());
+    net::FrameAssembler assembler;
+    pb::FrameChunk chunk;
+    while (!assembler.complete() && s.Read(&chunk)) ASSERT_TRUE(assembler.Add(chunk).ok());
+    ASSERT_TRUE(assembler.complete());
+    EXPECT_FALSE(assembler.Take().stats.reordered());
+  }
+  auto stats = c->GetServerStats();
+  ASSERT_TRUE(stats.ok());
+  EXPECT_EQ(stats->frames_reordered(), 0);
+  EXPECT_EQ(stats->retained_bytes(), 0);
+  ASSERT_TRUE(s.CloseSend().ok());
+  EXPECT_TRUE(s.Finish().ok());
 }
 
 // Reads the suite's daemon log.

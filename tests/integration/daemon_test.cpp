@@ -159,6 +159,64 @@ TEST_F(Daemon, BudgetSearchRunsOnceAndLaterViewsReuseItsEps) {
   }
 }
 
+// Reads chunks until a frame is complete; false if the stream ends first.
+bool ReadFrame(net::Session& s, net::Frame* out) {
+  net::FrameAssembler assembler;
+  pb::FrameChunk chunk;
+  while (s.Read(&chunk)) {
+    if (!assembler.Add(chunk).ok()) return false;
+    if (assembler.complete()) {
+      *out = assembler.Take();
+      return true;
+    }
+  }
+  return false;
+}
+
+// Within a session, a new view of the mesh the last refined frame drew (same volume,
+// isovalues, eps, normals) is re-ordered from it, not extracted again: the frame says so, and
+// equals a direct extraction for the new view. A progressive request then skips its coarse
+// frame; another eps is extracted. The memory it held is given back when the session ends.
+TEST_F(Daemon, NewViewOfTheSameMeshIsReorderedFromTheLastFrame) {
+  auto c = Connect();
+  auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  PreparedVolume local = Local("buckyball:65");
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  net::Session& s = **session;
+  const glm::dvec3 eyes[4] = {{2.5, 1.8, 3.1}, {-3.0, 0.5, 1.0}, {0.1, 0.2, -0.1}, {0.2, -2.8, -1.5}};
+  for (int i = 0; i < 4; ++i) {
+    SCOPED_TRACE(i);
+    const double eps = i < 3 ? 0.003 : 0.004;
+    pb::ViewRequest v = MakeView("buckyball:65", 80 + i, eps, eyes[i], pb::RAW);
+    v.set_progressive(i == 2);
+    ASSERT_TRUE(s.Send(v).ok());
+    net::Frame frame;
+    ASSERT_TRUE(ReadFrame(s, &frame));
+    EXPECT_EQ(frame.id, uint64_t(80 + i));
+    EXPECT_FALSE(frame.coarse) << "the re-ordered frame needs no coarse one before it";
+    EXPECT_EQ(frame.stats.reordered(), i == 1 || i == 2);
+    auto direct = Extract(*local.hierarchy, local.grid_to_world, DirectRequest(eps, eyes[i]));
+    ASSERT_TRUE(direct.ok());
+    ExpectSameFrame(direct->mesh, frame.mesh, 0.0f);
+  }
+  auto during = c->GetServerStats();
+  ASSERT_TRUE(during.ok());
+  EXPECT_EQ(during->frames_reordered(), before->frames_reordered() + 2);
+  EXPECT_GT(during->retained_bytes(), 0);
+  ASSERT_TRUE(s.CloseSend().ok());
+  EXPECT_TRUE(s.Finish().ok());
+  pb::ServerStats after;
+  EXPECT_TRUE(WaitForStats(
+      c.get(),
+      [&](const pb::ServerStats& st) {
+        return st.sessions_open() == 0 && st.retained_bytes() == before->retained_bytes();
+      },
+      &after))
+      << after.retained_bytes();
+}
+
 TEST_F(Daemon, FetchCommandWritesTheFrame) {
   const std::string out = scratch_->path() + "/fetched.ply";
   const std::string cmd = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +

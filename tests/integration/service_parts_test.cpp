@@ -27,7 +27,7 @@ TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
   DaemonConfig c;
   ASSERT_TRUE(LoadText(R"({"listen": "127.0.0.1:9", "volumes": {"a": "sphere:9"},
                            "limits": {"max_sessions": 2, "idle_timeout_s": 5},
-                           "frames": {"chunk_triangles": 1024}})",
+                           "frames": {"chunk_triangles": 1024, "retain_mb": 64}})",
                        &c)
                   .ok());
   EXPECT_EQ(c.listen, "127.0.0.1:9");
@@ -37,6 +37,8 @@ TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
   EXPECT_EQ(c.limits.max_isovalues, 16);  // untouched default
   EXPECT_EQ(DaemonConfig().limits.idle_timeout_s, 300);
   EXPECT_EQ(c.chunk_triangles, 1024);
+  EXPECT_EQ(c.retain_mb, 64);
+  EXPECT_EQ(DaemonConfig().retain_mb, 1024);
   EXPECT_TRUE(c.preload);  // the default
   ASSERT_TRUE(LoadText(R"({"preload": false})", &c).ok());
   EXPECT_FALSE(c.preload);
@@ -60,7 +62,21 @@ TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
   EXPECT_FALSE(ValidateConfig(bad).ok());
   bad.limits.idle_timeout_s = 0;  // off
   EXPECT_TRUE(ValidateConfig(bad).ok());
+  bad.retain_mb = -1;
+  EXPECT_NE(ValidateConfig(bad).message().find("retain_mb"), std::string::npos);
+  bad.retain_mb = 0;  // off
+  EXPECT_TRUE(ValidateConfig(bad).ok());
   EXPECT_TRUE(ValidateConfig(DaemonConfig()).ok());
+}
+
+// The example deploy/ ships names every key with a valid value.
+TEST(Config, ExampleConfigLoadsAndValidates) {
+  DaemonConfig c;
+  const absl::Status loaded = LoadConfigFile(ISOSTREAM_EXAMPLE_CONFIG, &c);
+  ASSERT_TRUE(loaded.ok()) << loaded;
+  EXPECT_TRUE(ValidateConfig(c).ok());
+  EXPECT_EQ(c.volumes.size(), 2u);
+  EXPECT_EQ(c.retain_mb, 1024);
 }
 
 TEST(Catalogue, GeneratorNamesOnlyWithinTheLimit) {
