@@ -505,7 +505,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
                      part.surface.data() + part.surface.size());
     if (retain) {
       record_top(int(appended));
-      retain->cut_.Append(part.cut, uint32_t(first));
+      retain->cut_.Append(part.cut, to_global.data());
     }
     ++appended;
     st.tets_visited += part.visited;
@@ -563,13 +563,15 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     cut.isovalues_ = r.isovalues;
     cut.eps_ = eps;
     cut.budget_ = r.budget;
-    cut.normals_ = r.normals;
+    cut.normal_mode_ = r.normals;
     cut.k_ = h.k();
     cut.xf_ = xf;
     cut.iso_count_ = c.iso_count;
     std::copy(c.iso, c.iso + c.iso_count, cut.iso_);
     cut.leaves_ = st.leaves;
-    cut.mesh_ = m;
+    cut.triangles_ = m.triangle_count();
+    cut.positions_ = m.positions;  // the triangles are in the records
+    cut.normals_ = m.normals;
   }
   st.total_ms = Ms(t_start);
   return result;

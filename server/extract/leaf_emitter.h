@@ -93,7 +93,8 @@ class LeafEmitter {
       if constexpr (!kEmit || !kRecord) return Component(t, first);
       const size_t before = out_->surface.size();
       const int n = Component(t, first);
-      cut_->AddLeaf(uint32_t(before), uint32_t(out_->surface.size() - before));
+      cut_->AddLeaf(&out_->triangles[3 * before], &out_->surface[before],
+                    uint32_t(out_->surface.size() - before));
       return n;
     }
     int order[kMaxSurfaces], count = 0;
@@ -116,22 +117,21 @@ class LeafEmitter {
       return triangles;
     }
     // Recorded with what orders the components for another view (the same expressions as
-    // above, so it decides as a fresh extraction would).
-    const MultiLeaf leaf{LeafGradient(t), t.v[0], t.f[0], uint32_t(cut_->components.size()),
-                         uint32_t(last - first)};
-    cut_->components.resize(leaf.first + leaf.count);
-    const size_t start = out_->surface.size();
+    // above, so it decides as a fresh extraction would), components by ascending isovalue.
+    size_t start[kMaxSurfaces], end[kMaxSurfaces];
     for (int j = 0; j < count; ++j) {
-      const size_t before = out_->surface.size();
+      start[order[j] - first] = out_->surface.size();
       triangles += Component(t, order[j]);
-      cut_->components[leaf.first + (order[j] - first)] = {
-          uint32_t(before), uint32_t(out_->surface.size() - before), uint32_t(order[j])};
+      end[order[j] - first] = out_->surface.size();
     }
-    if (out_->surface.size() == start) {  // all clipped away
-      cut_->components.resize(leaf.first);
-    } else {
-      cut_->AddMultiLeaf(leaf);
-    }
+    uint32_t nonempty = 0;
+    for (int i = 0; i < count; ++i) nonempty += end[i] > start[i];
+    if (nonempty == 0) return triangles;  // all clipped away
+    cut_->AddMultiLeaf({LeafGradient(t), t.v[0], t.f[0]}, nonempty);
+    for (int i = 0; i < count; ++i)
+      if (end[i] > start[i])
+        cut_->AddComponent(uint8_t(first + i), &out_->triangles[3 * start[i]],
+                           &out_->surface[start[i]], uint32_t(end[i] - start[i]));
     return triangles;
   }
 

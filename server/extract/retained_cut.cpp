@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <functional>
 #include <glm/geometric.hpp>
 #include <numeric>
 #include <string>
@@ -13,33 +14,37 @@ namespace isostream {
 
 using extract_internal::ChildZeroFirst;
 using extract_internal::Context;
-using extract_internal::CutComponent;
 using extract_internal::CutRecord;
 using extract_internal::MultiLeaf;
 using extract_internal::Unpack;
 
 bool RetainedCut::Serves(const ExtractRequest& r, double budget_eps) const {
-  if (mesh_.empty() && cut_.records.size() == 0 && isovalues_.empty()) return false;
-  if (r.isovalues != isovalues_ || r.normals != normals_) return false;
+  if (empty()) return false;
+  if (r.isovalues != isovalues_ || r.normals != normal_mode_) return false;
   if (r.budget > 0) return r.budget == budget_ || (budget_eps >= 0 && budget_eps == eps_);
   return budget_ == 0 && r.eps == eps_;
 }
 
 size_t RetainedCut::memory_bytes() const {
-  return (mesh_.positions.capacity() + mesh_.normals.capacity()) * sizeof(float) +
-         mesh_.triangles.capacity() * sizeof(uint32_t) + mesh_.surface.capacity() +
-         cut_.records.capacity() * sizeof(CutRecord) + cut_.multi.capacity() * sizeof(MultiLeaf) +
-         cut_.components.capacity() * sizeof(CutComponent);
+  return (positions_.capacity() + normals_.capacity()) * sizeof(float) +
+         cut_.records.capacity() * sizeof(CutRecord) + cut_.multi.capacity() * sizeof(MultiLeaf);
 }
 
 namespace {
 
-// Appends what one walk of the records draws, far to near, to `out`.
+// Writes what one walk of the records draws, far to near, into `out` (sized for the frame).
 class Walker {
  public:
-  Walker(const Context& c, const extract_internal::CutPart& cut, const OrderedMesh& from,
-         OrderedMesh* out)
-      : c_(c), cut_(cut), from_(from), out_(out) {}
+  // `ready` (may be empty) hears of drawn prefixes every `ready_step` triangles or so.
+  Walker(const Context& c, const extract_internal::CutPart& cut, OrderedMesh* out,
+         const std::function<void(const OrderedMesh&, size_t, size_t)>* ready, size_t ready_step)
+      : c_(c), cut_(cut), out_(out), ready_(ready), ready_step_(ready_step) {}
+
+  // Reports triangles drawn since the last report.
+  void Report() {
+    if (ready_ && *ready_ && written_ > reported_) (*ready_)(*out_, reported_, written_);
+    reported_ = written_;
+  }
 
   // The subtree in records [begin, end).
   void Subtree(uint32_t begin, uint32_t end) {
@@ -56,16 +61,17 @@ class Walker {
         if (r.kind == CutRecord::kRefine) {
           const Range first{cur.begin + 1, r.b}, second{r.b, cur.end};
           // The test the traversal makes, so the order is a fresh extraction's.
-          const bool swap = ChildZeroFirst(c_, r.cls, r.a) != r.child0_drawn_first;
+          const bool swap = ChildZeroFirst(c_, TetClass{r.c}, r.a) != r.child0_drawn_first;
           stack[top++] = swap ? first : second;
           cur = swap ? second : first;
           continue;
         }
         if (r.kind == CutRecord::kLeaf) {
-          Triangles(uint32_t(r.a), r.b);
+          Triangles(&r + 1, r.b);
         } else {
-          MultiLeafTriangles(cut_.multi[r.a]);
+          MultiLeafTriangles(r);
         }
+        if (written_ - reported_ >= ready_step_) Report();
       }
       if (top == 0) return;
       cur = stack[--top];
@@ -73,52 +79,53 @@ class Walker {
   }
 
   int64_t walked() const { return walked_; }
-  // Triangles drawn so far: out's arrays are sized for all of them up front.
   size_t written() const { return written_; }
 
  private:
-  // A leaf holds one or two triangles mostly: a plain loop, where vector inserts cost a call
-  // and their checks per leaf (2.5x the whole walk's time).
-  void Triangles(uint32_t first, uint32_t count) {
-    const uint32_t* from = from_.triangles.data() + 3 * size_t(first);
+  void Triangles(const CutRecord* from, uint32_t count) {
     uint32_t* to = out_->triangles.data() + 3 * written_;
-    for (uint32_t i = 0; i < 3 * count; ++i) to[i] = from[i];
-    const uint8_t* from_surface = from_.surface.data() + first;
-    uint8_t* to_surface = out_->surface.data() + written_;
-    for (uint32_t i = 0; i < count; ++i) to_surface[i] = from_surface[i];
+    uint8_t* surface = out_->surface.data() + written_;
+    for (uint32_t t = 0; t < count; ++t) {
+      to[3 * t] = uint32_t(from[t].a);
+      to[3 * t + 1] = uint32_t(from[t].a >> 32);
+      to[3 * t + 2] = from[t].b;
+      surface[t] = from[t].c;
+    }
     written_ += count;
   }
 
-  // Components far to near, as LeafEmitter::Components orders them.
-  void MultiLeafTriangles(const MultiLeaf& leaf) {
-    const CutComponent* comp = &cut_.components[leaf.first];
-    const int count = int(leaf.count);
-    const int first = int(comp[0].iso);  // components hold consecutive isovalues
-    const int last = first + count;
-    auto draw = [&](int iso) {
-      const CutComponent& k = comp[iso - first];
-      Triangles(k.first_triangle, k.triangles);
-    };
+  // Components far to near, as LeafEmitter::Components orders them. They follow the leaf's
+  // record by ascending isovalue, each a kComponent record and its triangles.
+  void MultiLeafTriangles(const CutRecord& leaf_record) {
+    const MultiLeaf& leaf = cut_.multi[leaf_record.a];
+    const CutRecord* block[kMaxSurfaces];
+    const int count = int(leaf_record.b);
+    const CutRecord* at = &leaf_record + 1;
+    for (int i = 0; i < count; ++i, at += 1 + at->b) block[i] = at;
+    // Components without triangles were not recorded: block order is isovalue order all the
+    // same, and only the split below needs the isovalues themselves.
+    auto draw = [&](int i) { Triangles(block[i] + 1, block[i]->b); };
     if (!c_.ordered) {
-      for (int i = first; i < last; ++i) draw(i);
+      for (int i = 0; i < count; ++i) draw(i);
     } else if (c_.orthographic) {
       const bool descending = glm::dot(leaf.g, c_.dir) > 0;
-      for (int i = first; i < last; ++i) draw(descending ? last - 1 - (i - first) : i);
+      for (int i = 0; i < count; ++i) draw(descending ? count - 1 - i : i);
     } else {
       const double fe = leaf.f0 + glm::dot(leaf.g, c_.eye - glm::dvec3(Unpack(leaf.v0)));
-      int split = first;
-      while (split < last && c_.iso[split] <= fe) ++split;
-      for (int i = last - 1; i >= split; --i) draw(i);
-      for (int i = first; i < split; ++i) draw(i);
+      int split = 0;
+      while (split < count && c_.iso[block[split]->c] <= fe) ++split;
+      for (int i = count - 1; i >= split; --i) draw(i);
+      for (int i = 0; i < split; ++i) draw(i);
     }
   }
 
   const Context& c_;
   const extract_internal::CutPart& cut_;
-  const OrderedMesh& from_;
   OrderedMesh* out_;
+  const std::function<void(const OrderedMesh&, size_t, size_t)>* ready_;
+  const size_t ready_step_;
   int64_t walked_ = 0;
-  size_t written_ = 0;
+  size_t written_ = 0, reported_ = 0;
 };
 
 }  // namespace
@@ -142,11 +149,10 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
 
   ExtractResult result;
   OrderedMesh& m = result.mesh;
-  const OrderedMesh& from = cut.mesh_;
-  m.positions = from.positions;
-  m.normals = from.normals;
-  m.triangles.resize(from.triangles.size());
-  m.surface.resize(from.surface.size());
+  m.positions = cut.positions_;
+  m.normals = cut.normals_;
+  m.triangles.resize(3 * cut.triangles_);
+  m.surface.resize(cut.triangles_);
 
   int roots[kNumInitialTets];
   if (c.ordered) {
@@ -156,7 +162,10 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
   } else {
     std::iota(roots, roots + kNumInitialTets, 0);
   }
-  Walker walker(c, cut.cut_, from, &m);
+  // Prefixes are reported every few thousand triangles, as the extraction's subtrees report
+  // them, so the first chunk can leave early; stopping is checked per initial tetrahedron
+  // (a whole frame is drawn in tens of milliseconds).
+  Walker walker(c, cut.cut_, &m, observer ? &observer->on_ready : nullptr, 4096);
   for (int i : roots) {
     if (observer) {
       if (observer->cancel && observer->cancel->load(std::memory_order_relaxed))
@@ -164,14 +173,12 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
       if (std::chrono::steady_clock::now() > observer->deadline)
         return absl::DeadlineExceededError("extraction passed its deadline");
     }
-    const size_t first = walker.written();
     walker.Subtree(cut.root_begin_[i], cut.root_end_[i]);
-    if (observer && observer->on_ready && walker.written() > first)
-      observer->on_ready(m, first, walker.written());
   }
-  if (walker.written() != from.triangle_count())
+  walker.Report();
+  if (walker.written() != cut.triangles_)
     return absl::InternalError("retained cut drew " + std::to_string(walker.written()) + " of " +
-                               std::to_string(from.triangle_count()) + " triangles");
+                               std::to_string(cut.triangles_) + " triangles");
 
   ExtractStats& st = result.stats;
   st.eps_used = cut.eps_;

@@ -28,9 +28,9 @@ class RetainedCut {
   bool Serves(const ExtractRequest& request, double budget_eps = -1) const;
 
   double eps_used() const { return eps_; }
-  size_t triangle_count() const { return mesh_.triangle_count(); }
+  size_t triangle_count() const { return triangles_; }
   size_t memory_bytes() const;
-  bool empty() const { return cut_.records.size() == 0 && mesh_.empty(); }
+  bool empty() const { return isovalues_.empty(); }
 
  private:
   friend absl::StatusOr<ExtractResult> Extract(const Hierarchy&, const GridToWorld&,
@@ -43,14 +43,15 @@ class RetainedCut {
   std::vector<float> isovalues_;
   double eps_ = 0;
   int64_t budget_ = 0;
-  NormalMode normals_ = NormalMode::kSmooth;
+  NormalMode normal_mode_ = NormalMode::kSmooth;
   int k_ = 0;
   GridToWorld xf_;
   float iso_[kMaxSurfaces] = {};  // sorted, as the traversal's Context holds them
   int iso_count_ = 0;
 
-  OrderedMesh mesh_;  // in the extraction's order
-  extract_internal::CutPart cut_;  // one subtree per initial tetrahedron
+  std::vector<float> positions_, normals_;  // the frame's vertices, as OrderedMesh holds them
+  size_t triangles_ = 0;
+  extract_internal::CutPart cut_;  // one subtree per initial tetrahedron, triangles inside
   // Records of initial tetrahedron i: [root_begin_[i], root_end_[i]).
   std::array<uint32_t, kNumInitialTets> root_begin_{}, root_end_{};
   int64_t leaves_ = 0;

@@ -195,6 +195,7 @@ void CodecFigures(const OrderedMesh& mesh, const Volume& volume) {
 struct ViewTiming {
   double first_chunk_ms, complete_ms, server_extract_ms;
   int64_t triangles, bytes;
+  bool reordered;
 };
 
 // Sends `view` on the session and reads its frame; decodes when `decode`.
@@ -217,6 +218,7 @@ bool RunView(net::Session* s, const pb::ViewRequest& view, bool decode, ViewTimi
       t->complete_ms = Ms(t0, Clock::now());
       t->triangles = chunk.stats().triangles();
       t->server_extract_ms = chunk.stats().extract_ms();
+      t->reordered = chunk.stats().reordered();
       return true;
     }
   }
@@ -253,108 +255,119 @@ int main(int argc, char** argv) {
   CodecFigures(frame->mesh, *prepared->volume);
   if (views < 1) return 0;
 
-  // The daemon's service in this process, on a free loopback port.
-  service::DaemonConfig config;
-  config.listen = "127.0.0.1:0";
-  config.cache_dir = cache.dir;
-  config.limits.max_dim = 1025;
-  config.limits.max_triangles = 8'000'000;
-  service::IsostreamService svc(config);
-  grpc::ServerBuilder builder;
-  int port = 0;
-  builder.AddListeningPort(config.listen, grpc::InsecureServerCredentials(), &port);
-  builder.RegisterService(&svc);
-  auto server = builder.BuildAndStart();
-  if (!server || port == 0) return 1;
-  net::ClientOptions options;
-  options.address = "127.0.0.1:" + std::to_string(port);
-  auto client = net::Client::Connect(options);
-  if (!client.ok()) return 1;
+  // The daemon's service in this process, on a free loopback port: once retaining nothing
+  // (every view is extracted), once as the daemon runs by default (a session's new view of
+  // the same mesh is re-ordered from its last frame).
+  for (const int64_t retain_mb : {int64_t{0}, service::DaemonConfig().retain_mb}) {
+    service::DaemonConfig config;
+    config.listen = "127.0.0.1:0";
+    config.retain_mb = retain_mb;
+    config.cache_dir = cache.dir;
+    config.limits.max_dim = 1025;
+    config.limits.max_triangles = 8'000'000;
+    service::IsostreamService svc(config);
+    grpc::ServerBuilder builder;
+    int port = 0;
+    builder.AddListeningPort(config.listen, grpc::InsecureServerCredentials(), &port);
+    builder.RegisterService(&svc);
+    auto server = builder.BuildAndStart();
+    if (!server || port == 0) return 1;
+    net::ClientOptions options;
+    options.address = "127.0.0.1:" + std::to_string(port);
+    auto client = net::Client::Connect(options);
+    if (!client.ok()) return 1;
 
-  std::printf(
-      "\nview change -> frame at the client over loopback gRPC (eps %.4g, %d views, "
-      "median [min]; extract ms: the server's extraction alone)\n",
-      eps, views);
-  std::printf("  %-7s %-8s %10s %16s %16s %12s %10s %8s\n", "codec", "decoded", "triangles",
-              "first chunk ms", "complete ms", "extract ms", "bytes/tri", "cpu ms");
-  for (pb::Codec codec : {pb::DRACO, pb::RAW}) {
-    for (bool decode : {false, true}) {
+    std::printf(
+        "\nview change -> frame at the client over loopback gRPC (eps %.4g, %d views, "
+        "median [min]; extract ms: the server's extraction alone), %s\n",
+        eps, views,
+        retain_mb > 0 ? "frames retained: the same mesh re-ordered for each new view"
+                      : "nothing retained: every view extracted");
+    std::printf("  %-7s %-8s %10s %16s %16s %12s %10s %8s %10s\n", "codec", "decoded",
+                "triangles", "first chunk ms", "complete ms", "extract ms", "bytes/tri", "cpu ms",
+                "re-ordered");
+    for (pb::Codec codec : {pb::DRACO, pb::RAW}) {
+      for (bool decode : {false, true}) {
+        auto session = (*client)->OpenSession();
+        if (!session.ok()) return 1;
+        std::vector<double> first, complete, extract;
+        int reordered = 0;
+        ViewTiming t{};
+        double cpu_start = 0;
+        for (int i = -1; i < views; ++i) {  // view -1 warms the volume and the connection
+          pb::ViewRequest v;
+          v.set_volume(spec);
+          v.set_request_id(uint64_t(i + 2));
+          for (float iso : kIso) v.add_surfaces()->set_isovalue(iso);
+          v.set_eps(eps);
+          const glm::dvec3 e = Eye(i + 1);
+          v.mutable_camera()->mutable_eye()->set_x(e.x);
+          v.mutable_camera()->mutable_eye()->set_y(e.y);
+          v.mutable_camera()->mutable_eye()->set_z(e.z);
+          v.set_codec(codec);
+          if (!RunView(session->get(), v, decode, &t)) {
+            std::fprintf(stderr, "bench_stream: view failed\n");
+            return 1;
+          }
+          if (i < 0) {
+            cpu_start = CpuMs();
+            continue;
+          }
+          reordered += t.reordered;
+          first.push_back(t.first_chunk_ms);
+          complete.push_back(t.complete_ms);
+          extract.push_back(t.server_extract_ms);
+        }
+        const double cpu_per_view = (CpuMs() - cpu_start) / views;
+        std::printf("  %-7s %-8s %10lld %8.1f [%5.1f] %8.1f [%5.1f] %12.1f %10.2f %8.0f %7d/%d\n",
+                    codec == pb::RAW ? "raw" : "draco", decode ? "yes" : "no", (long long)t.triangles,
+                    Median(first), *std::min_element(first.begin(), first.end()), Median(complete),
+                    *std::min_element(complete.begin(), complete.end()), Median(extract),
+                    double(t.bytes) / double(std::max<int64_t>(1, t.triangles)), cpu_per_view,
+                    reordered, views);
+        (*session)->CloseSend().IgnoreError();
+        (*session)->Finish().IgnoreError();
+      }
+    }
+    // Progressive: the coarse frame (20k-triangle budget) first, then the refined one.
+    {
       auto session = (*client)->OpenSession();
       if (!session.ok()) return 1;
-      std::vector<double> first, complete, extract;
-      ViewTiming t{};
-      double cpu_start = 0;
-      for (int i = -1; i < views; ++i) {  // view -1 warms the volume and the connection
+      std::vector<double> first, coarse, refined;
+      for (int i = -1; i < views; ++i) {
         pb::ViewRequest v;
         v.set_volume(spec);
-        v.set_request_id(uint64_t(i + 2));
+        v.set_request_id(uint64_t(100 + i));
         for (float iso : kIso) v.add_surfaces()->set_isovalue(iso);
         v.set_eps(eps);
+        v.set_progressive(true);
         const glm::dvec3 e = Eye(i + 1);
         v.mutable_camera()->mutable_eye()->set_x(e.x);
         v.mutable_camera()->mutable_eye()->set_y(e.y);
         v.mutable_camera()->mutable_eye()->set_z(e.z);
-        v.set_codec(codec);
-        if (!RunView(session->get(), v, decode, &t)) {
-          std::fprintf(stderr, "bench_stream: view failed\n");
-          return 1;
+        const auto t0 = Clock::now();
+        if (!(*session)->Send(v).ok()) return 1;
+        pb::FrameChunk chunk;
+        double t_first = -1, t_coarse = -1;
+        while ((*session)->Read(&chunk)) {
+          if (chunk.frame_id() != v.request_id()) continue;
+          if (t_first < 0) t_first = Ms(t0, Clock::now());
+          if (chunk.last() && chunk.coarse()) t_coarse = Ms(t0, Clock::now());
+          if (chunk.last() && !chunk.coarse()) break;
         }
-        if (i < 0) {
-          cpu_start = CpuMs();
-          continue;
-        }
-        first.push_back(t.first_chunk_ms);
-        complete.push_back(t.complete_ms);
-        extract.push_back(t.server_extract_ms);
+        if (i < 0) continue;
+        first.push_back(t_first);
+        coarse.push_back(t_coarse);
+        refined.push_back(Ms(t0, Clock::now()));
       }
-      const double cpu_per_view = (CpuMs() - cpu_start) / views;
-      std::printf("  %-7s %-8s %10lld %8.1f [%5.1f] %8.1f [%5.1f] %12.1f %10.2f %8.0f\n",
-                  codec == pb::RAW ? "raw" : "draco", decode ? "yes" : "no", (long long)t.triangles,
-                  Median(first), *std::min_element(first.begin(), first.end()), Median(complete),
-                  *std::min_element(complete.begin(), complete.end()), Median(extract),
-                  double(t.bytes) / double(std::max<int64_t>(1, t.triangles)), cpu_per_view);
+      std::printf(
+          "\nprogressive (draco, not decoded): first chunk %.1f ms, coarse frame complete "
+          "%.1f ms (-1: none sent), refined frame complete %.1f ms (medians)\n",
+          Median(first), Median(coarse), Median(refined));
       (*session)->CloseSend().IgnoreError();
       (*session)->Finish().IgnoreError();
     }
-  }
-  // Progressive: the coarse frame (20k-triangle budget) first, then the refined one.
-  {
-    auto session = (*client)->OpenSession();
-    if (!session.ok()) return 1;
-    std::vector<double> first, coarse, refined;
-    for (int i = -1; i < views; ++i) {
-      pb::ViewRequest v;
-      v.set_volume(spec);
-      v.set_request_id(uint64_t(100 + i));
-      for (float iso : kIso) v.add_surfaces()->set_isovalue(iso);
-      v.set_eps(eps);
-      v.set_progressive(true);
-      const glm::dvec3 e = Eye(i + 1);
-      v.mutable_camera()->mutable_eye()->set_x(e.x);
-      v.mutable_camera()->mutable_eye()->set_y(e.y);
-      v.mutable_camera()->mutable_eye()->set_z(e.z);
-      const auto t0 = Clock::now();
-      if (!(*session)->Send(v).ok()) return 1;
-      pb::FrameChunk chunk;
-      double t_first = -1, t_coarse = -1;
-      while ((*session)->Read(&chunk)) {
-        if (chunk.frame_id() != v.request_id()) continue;
-        if (t_first < 0) t_first = Ms(t0, Clock::now());
-        if (chunk.last() && chunk.coarse()) t_coarse = Ms(t0, Clock::now());
-        if (chunk.last() && !chunk.coarse()) break;
-      }
-      if (i < 0) continue;
-      first.push_back(t_first);
-      coarse.push_back(t_coarse);
-      refined.push_back(Ms(t0, Clock::now()));
-    }
-    std::printf(
-        "\nprogressive (draco, not decoded): first chunk %.1f ms, coarse frame complete "
-        "%.1f ms, refined frame complete %.1f ms (medians)\n",
-        Median(first), Median(coarse), Median(refined));
-    (*session)->CloseSend().IgnoreError();
-    (*session)->Finish().IgnoreError();
-  }
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
+  }
   return 0;
 }

@@ -151,6 +151,35 @@ TEST(RetainedCut, AnotherViewChangesTheOrder) {
   EXPECT_GT(moved, a->mesh.triangle_count() / 2);
 }
 
+// The observer hears of the re-ordered frame in contiguous prefixes, a few thousand triangles
+// at a time, as it does for an extraction: a stream cuts its first chunk from the first ones.
+TEST(RetainedCut, ObserverSeesContiguousPrefixes) {
+  const auto h = testing::MakeHierarchy(5, BlobsField);
+  ExtractRequest r;
+  r.isovalues = {0.2f, 0.5f, 0.8f};
+  r.view = Perspective({-30, 70, 40});
+  RetainedCut cut;
+  ASSERT_TRUE(Extract(*h, GridToWorld{}, r, nullptr, &cut).ok());
+  ASSERT_GT(cut.triangle_count(), 3 * 4096u);
+  std::vector<std::pair<size_t, size_t>> ranges;
+  ExtractObserver observer;
+  observer.on_ready = [&](const OrderedMesh& m, size_t first, size_t end) {
+    EXPECT_LE(end, m.triangle_count());
+    ranges.push_back({first, end});
+  };
+  auto b = Reorder(cut, Perspective({70, -30, -20}), DrawOrder::kBackToFront, &observer);
+  ASSERT_TRUE(b.ok());
+  ASSERT_GE(ranges.size(), 3u);
+  size_t expected_first = 0;
+  for (const auto& [first, end] : ranges) {
+    EXPECT_EQ(first, expected_first);
+    EXPECT_GT(end, first);
+    expected_first = end;
+  }
+  EXPECT_EQ(expected_first, b->mesh.triangle_count());
+  EXPECT_LT(ranges[0].second, 4096u + 64);  // the first prefix is small
+}
+
 TEST(RetainedCut, ServesOnlyTheSameMesh) {
   const auto h = testing::MakeHierarchy(4, SphereField);
   ExtractRequest r;
