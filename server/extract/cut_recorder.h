@@ -1,15 +1,13 @@
 // What an extraction keeps of its tree so that another view can be served by re-ordering the
 // same triangles (retained_cut.h): the refined nodes and the leaves that emitted triangles, in
-// preorder, as the traversal met them, each leaf followed by its triangles. Private to
-// server/extract.
+// preorder, as the traversal met them. Private to server/extract.
 //
 // A refined node's record is followed by its first-drawn child's subtree, then the other's
 // (from `b`); the next view draws them in the order its own plane test gives, which is the
 // test the traversal makes (ChildZeroFirst), so the order is the one a fresh extraction for
-// that view would produce. A leaf crossed by several surfaces keeps what §4.3 orders its
-// components by. Triangles sit right after their leaf, in the same 16-byte slots, so that a
-// walk in another order reads one stream, not records here and triangles elsewhere (which
-// took half of its time).
+// that view would produce. A leaf names its triangles; a leaf crossed by several surfaces
+// keeps what §4.3 orders its components by. Each subtree of the parallel split records into
+// its own CutPart, numbering triangles from its own first, so nothing is copied at the join.
 #pragma once
 
 #include <cstdint>
@@ -22,17 +20,16 @@
 namespace isostream::extract_internal {
 
 struct CutRecord {
-  enum Kind : uint8_t { kRefine, kLeaf, kMultiLeaf, kComponent, kTriangle };
-  // kRefine: the refinement vertex. kMultiLeaf: index into CutPart::multi. kTriangle: its first
-  // two vertices (low, high half).
+  enum Kind : uint8_t { kRefine, kLeaf, kMultiLeaf, kComponent, kPart };
+  // kRefine: the refinement vertex. kLeaf, kComponent: the first triangle (of the part).
+  // kMultiLeaf: index into CutPart::multi. kPart: the part (a subtree of the split).
   uint64_t a;
   // kRefine: the record where the second-drawn child's subtree starts (the first's starts
-  // right after this record). kLeaf, kComponent: how many triangles follow. kMultiLeaf: how
-  // many components follow. kTriangle: its third vertex.
+  // right after this record). kLeaf, kComponent: the triangle count. kMultiLeaf: how many
+  // kComponent records follow.
   uint32_t b;
   Kind kind;
-  // kRefine: the class. kComponent: the sorted isovalue index (Context::iso). kTriangle: the
-  // surface (the request's isovalue index).
+  // kRefine: the class. kComponent: the sorted isovalue index (Context::iso).
   uint8_t c;
   bool child0_drawn_first;  // kRefine: in the recorded order
   uint8_t unused = 0;
@@ -46,8 +43,7 @@ struct MultiLeaf {
   float f0;
 };
 
-// The records of one subtree (or of a whole frame, once joined). Vertex numbers are the
-// subtree's own until the join maps them to the frame's.
+// The records of one subtree of the split (or of the tree above them).
 struct CutPart {
   AppendBuffer<CutRecord> records;
   std::vector<MultiLeaf> multi;
@@ -73,50 +69,19 @@ struct CutPart {
     }
     records[i].b = uint32_t(records.size());
   }
-  // A leaf with one surface: its `count` triangles (3 vertices and a surface each).
-  void AddLeaf(const uint32_t* vertices, const uint8_t* surfaces, uint32_t count) {
-    if (count == 0) return;
-    *records.Extend(1) = {0, count, CutRecord::kLeaf, 0, false};
-    AddTriangles(vertices, surfaces, count);
+  // A leaf with one surface: triangles [first, first + count).
+  void AddLeaf(uint32_t first, uint32_t count) {
+    if (count > 0) *records.Extend(1) = {first, count, CutRecord::kLeaf, 0, false};
   }
-  // A leaf with several surfaces: `components` blocks follow (AddComponent).
+  // A leaf with several surfaces: `components` AddComponent records follow.
   void AddMultiLeaf(const MultiLeaf& leaf, uint32_t components) {
     *records.Extend(1) = {multi.size(), components, CutRecord::kMultiLeaf, 0, false};
     multi.push_back(leaf);
   }
-  void AddComponent(uint8_t iso, const uint32_t* vertices, const uint8_t* surfaces,
-                    uint32_t count) {
-    *records.Extend(1) = {0, count, CutRecord::kComponent, iso, false};
-    AddTriangles(vertices, surfaces, count);
+  void AddComponent(uint8_t iso, uint32_t first, uint32_t count) {
+    *records.Extend(1) = {first, count, CutRecord::kComponent, iso, false};
   }
-
-  // Appends a subtree's records as one subtree here, its vertices renumbered by `to_frame`.
-  void Append(const CutPart& part, const uint32_t* to_frame) {
-    const uint32_t base = uint32_t(records.size());
-    const uint64_t multi_base = multi.size();
-    CutRecord* out = records.Extend(part.records.size());
-    for (size_t i = 0; i < part.records.size(); ++i) {
-      CutRecord r = part.records[i];
-      if (r.kind == CutRecord::kTriangle) {
-        r.a = uint64_t(to_frame[uint32_t(r.a)]) | uint64_t(to_frame[r.a >> 32]) << 32;
-        r.b = to_frame[r.b];
-      } else if (r.kind == CutRecord::kRefine) {
-        r.b += base;
-      } else if (r.kind == CutRecord::kMultiLeaf) {
-        r.a += multi_base;
-      }
-      out[i] = r;
-    }
-    multi.insert(multi.end(), part.multi.begin(), part.multi.end());
-  }
-
- private:
-  void AddTriangles(const uint32_t* v, const uint8_t* surfaces, uint32_t count) {
-    CutRecord* out = records.Extend(count);
-    for (uint32_t t = 0; t < count; ++t)
-      out[t] = {uint64_t(v[3 * t]) | uint64_t(v[3 * t + 1]) << 32, v[3 * t + 2],
-                CutRecord::kTriangle, surfaces[t], false};
-  }
+  void AddPart(uint32_t part) { *records.Extend(1) = {part, 0, CutRecord::kPart, 0, false}; }
 };
 
 }  // namespace isostream::extract_internal

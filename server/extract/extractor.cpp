@@ -331,7 +331,7 @@ absl::StatusOr<std::vector<int64_t>> CountTrianglesPerEtaCode(const Hierarchy& h
 absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
                                       const ExtractRequest& r, const ExtractObserver* observer,
                                       RetainedCut* retain) {
-  if (retain) *retain = RetainedCut();
+  if (retain) retain->Clear();
   ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
   const auto t_start = std::chrono::steady_clock::now();
   ExtractResult result;
@@ -422,8 +422,14 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   // subtree's own, in preorder.
   size_t next_event = 0;
   std::vector<uint32_t> top_record(top.entries.size());
+  if (retain) {
+    // Each subtree records into its own part; the parts keep their buffers across frames.
+    retain->parts_.resize(items.size());
+    for (extract_internal::CutPart& part : retain->parts_) part.clear();
+    retain->part_first_triangle_.assign(items.size(), 0);
+  }
   auto record_top = [&](int item) {
-    extract_internal::CutPart& cut = retain->cut_;
+    extract_internal::CutPart& cut = retain->top_;
     for (; next_event < top.events.size(); ++next_event) {
       const TopTree::Event& e = top.events[next_event];
       switch (e.kind) {
@@ -505,7 +511,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
                      part.surface.data() + part.surface.size());
     if (retain) {
       record_top(int(appended));
-      retain->cut_.Append(part.cut, to_global.data());
+      retain->top_.AddPart(uint32_t(appended));
+      retain->part_first_triangle_[appended] = uint32_t(first);
     }
     ++appended;
     st.tets_visited += part.visited;
@@ -532,7 +539,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
             }
             std::unique_ptr<SubtreeMesh> part = pool.Acquire();
             if (retain) {
-              Traverser<true, true>(c, &table, part.get(), nullptr, &part->cut).Run(items[i]);
+              Traverser<true, true>(c, &table, part.get(), nullptr, &retain->parts_[i])
+                  .Run(items[i]);
             } else {
               Traverser<true>(c, &table, part.get()).Run(items[i]);
             }
@@ -548,7 +556,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
         tbb::simple_partitioner());
   });
   if (halted) {
-    if (retain) *retain = RetainedCut();
+    if (retain) retain->Clear();
     return StopReason(observer);
   }
   st.extract_ms = Ms(t0) - join_ms;
@@ -569,9 +577,11 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     cut.iso_count_ = c.iso_count;
     std::copy(c.iso, c.iso + c.iso_count, cut.iso_);
     cut.leaves_ = st.leaves;
-    cut.triangles_ = m.triangle_count();
-    cut.positions_ = m.positions;  // the triangles are in the records
-    cut.normals_ = m.normals;
+    // assign, not operator=: the cut's arrays keep their capacity from frame to frame.
+    cut.mesh_.positions.assign(m.positions.begin(), m.positions.end());
+    cut.mesh_.normals.assign(m.normals.begin(), m.normals.end());
+    cut.mesh_.triangles.assign(m.triangles.begin(), m.triangles.end());
+    cut.mesh_.surface.assign(m.surface.begin(), m.surface.end());
   }
   st.total_ms = Ms(t_start);
   return result;

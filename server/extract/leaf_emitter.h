@@ -93,8 +93,7 @@ class LeafEmitter {
       if constexpr (!kEmit || !kRecord) return Component(t, first);
       const size_t before = out_->surface.size();
       const int n = Component(t, first);
-      cut_->AddLeaf(&out_->triangles[3 * before], &out_->surface[before],
-                    uint32_t(out_->surface.size() - before));
+      cut_->AddLeaf(uint32_t(before), uint32_t(out_->surface.size() - before));
       return n;
     }
     int order[kMaxSurfaces], count = 0;
@@ -130,8 +129,7 @@ class LeafEmitter {
     cut_->AddMultiLeaf({LeafGradient(t), t.v[0], t.f[0]}, nonempty);
     for (int i = 0; i < count; ++i)
       if (end[i] > start[i])
-        cut_->AddComponent(uint8_t(first + i), &out_->triangles[3 * start[i]],
-                           &out_->surface[start[i]], uint32_t(end[i] - start[i]));
+        cut_->AddComponent(uint8_t(first + i), uint32_t(start[i]), uint32_t(end[i] - start[i]));
     return triangles;
   }
 

@@ -25,39 +25,62 @@ bool RetainedCut::Serves(const ExtractRequest& r, double budget_eps) const {
   return budget_ == 0 && r.eps == eps_;
 }
 
+void RetainedCut::Clear() {
+  isovalues_.clear();
+  eps_ = 0;
+  budget_ = 0;
+  iso_count_ = 0;
+  mesh_.clear();
+  top_.clear();
+  for (extract_internal::CutPart& part : parts_) part.clear();
+  part_first_triangle_.clear();
+  root_begin_.fill(0);
+  root_end_.fill(0);
+  leaves_ = 0;
+}
+
 size_t RetainedCut::memory_bytes() const {
-  return (positions_.capacity() + normals_.capacity()) * sizeof(float) +
-         cut_.records.capacity() * sizeof(CutRecord) + cut_.multi.capacity() * sizeof(MultiLeaf);
+  auto part_bytes = [](const extract_internal::CutPart& p) {
+    return p.records.capacity() * sizeof(CutRecord) + p.multi.capacity() * sizeof(MultiLeaf);
+  };
+  size_t bytes = (mesh_.positions.capacity() + mesh_.normals.capacity()) * sizeof(float) +
+                 mesh_.triangles.capacity() * sizeof(uint32_t) + mesh_.surface.capacity() +
+                 part_bytes(top_) + part_first_triangle_.capacity() * sizeof(uint32_t);
+  for (const extract_internal::CutPart& part : parts_) bytes += part_bytes(part);
+  return bytes;
 }
 
 namespace {
+
+// What a walk reads of a RetainedCut besides the top records.
+struct RetainedCutParts {
+  const OrderedMesh& mesh;
+  const std::vector<extract_internal::CutPart>& parts;
+  const std::vector<uint32_t>& first_triangle;
+};
 
 // Writes what one walk of the records draws, far to near, into `out` (sized for the frame).
 class Walker {
  public:
   // `ready` (may be empty) hears of drawn prefixes every `ready_step` triangles or so.
-  Walker(const Context& c, const extract_internal::CutPart& cut, OrderedMesh* out,
+  Walker(const Context& c, const RetainedCutParts& cut, OrderedMesh* out,
          const std::function<void(const OrderedMesh&, size_t, size_t)>* ready, size_t ready_step)
       : c_(c), cut_(cut), out_(out), ready_(ready), ready_step_(ready_step) {}
 
-  // Reports triangles drawn since the last report.
-  void Report() {
-    if (ready_ && *ready_ && written_ > reported_) (*ready_)(*out_, reported_, written_);
-    reported_ = written_;
-  }
-
-  // The subtree in records [begin, end).
-  void Subtree(uint32_t begin, uint32_t end) {
+  // The subtree in records [begin, end) of `part`, whose triangle numbers start at `base`.
+  void Subtree(const extract_internal::CutPart& part, uint32_t base, uint32_t begin,
+               uint32_t end) {
     struct Range {
       uint32_t begin, end;
     };
     Range stack[3 * 16 + 8];  // one per refined ancestor
     int top = 0;
     Range cur{begin, end};
+    const CutRecord* records = part.records.data();
     for (;;) {
       if (cur.begin < cur.end) {
         ++walked_;
-        const CutRecord& r = cut_.records[cur.begin];
+        const CutRecord& r = records[cur.begin];
         if (r.kind == CutRecord::kRefine) {
           const Range first{cur.begin + 1, r.b}, second{r.b, cur.end};
           // The test the traversal makes, so the order is a fresh extraction's.
@@ -67,9 +90,12 @@ class Walker {
           continue;
         }
         if (r.kind == CutRecord::kLeaf) {
-          Triangles(&r + 1, r.b);
-        } else {
-          MultiLeafTriangles(r);
+          Triangles(base + uint32_t(r.a), r.b);
+        } else if (r.kind == CutRecord::kMultiLeaf) {
+          MultiLeafTriangles(part, base, r);
+        } else {  // kPart: a subtree of the split, in its own records
+          const extract_internal::CutPart& sub = cut_.parts[r.a];
+          Subtree(sub, cut_.first_triangle[r.a], 0, uint32_t(sub.records.size()));
         }
         if (written_ - reported_ >= ready_step_) Report();
       }
@@ -78,33 +104,37 @@ class Walker {
     }
   }
 
+  // Reports triangles drawn since the last report.
+  void Report() {
+    if (ready_ && *ready_ && written_ > reported_) (*ready_)(*out_, reported_, written_);
+    reported_ = written_;
+  }
+
   int64_t walked() const { return walked_; }
   size_t written() const { return written_; }
 
  private:
-  void Triangles(const CutRecord* from, uint32_t count) {
+  // A leaf holds one or two triangles mostly: a plain loop, where vector inserts cost a call
+  // and their checks per leaf.
+  void Triangles(uint32_t first, uint32_t count) {
+    const uint32_t* from = cut_.mesh.triangles.data() + 3 * size_t(first);
     uint32_t* to = out_->triangles.data() + 3 * written_;
-    uint8_t* surface = out_->surface.data() + written_;
-    for (uint32_t t = 0; t < count; ++t) {
-      to[3 * t] = uint32_t(from[t].a);
-      to[3 * t + 1] = uint32_t(from[t].a >> 32);
-      to[3 * t + 2] = from[t].b;
-      surface[t] = from[t].c;
-    }
+    for (uint32_t i = 0; i < 3 * count; ++i) to[i] = from[i];
+    const uint8_t* from_surface = cut_.mesh.surface.data() + first;
+    uint8_t* to_surface = out_->surface.data() + written_;
+    for (uint32_t i = 0; i < count; ++i) to_surface[i] = from_surface[i];
     written_ += count;
   }
 
-  // Components far to near, as LeafEmitter::Components orders them. They follow the leaf's
-  // record by ascending isovalue, each a kComponent record and its triangles.
-  void MultiLeafTriangles(const CutRecord& leaf_record) {
-    const MultiLeaf& leaf = cut_.multi[leaf_record.a];
-    const CutRecord* block[kMaxSurfaces];
+  // Components far to near, as LeafEmitter::Components orders them. Their records follow the
+  // leaf's by ascending isovalue (those that left no triangle are not recorded: the order of
+  // the others is the same).
+  void MultiLeafTriangles(const extract_internal::CutPart& part, uint32_t base,
+                          const CutRecord& leaf_record) {
+    const MultiLeaf& leaf = part.multi[leaf_record.a];
+    const CutRecord* comp = &leaf_record + 1;
     const int count = int(leaf_record.b);
-    const CutRecord* at = &leaf_record + 1;
-    for (int i = 0; i < count; ++i, at += 1 + at->b) block[i] = at;
-    // Components without triangles were not recorded: block order is isovalue order all the
-    // same, and only the split below needs the isovalues themselves.
-    auto draw = [&](int i) { Triangles(block[i] + 1, block[i]->b); };
+    auto draw = [&](int i) { Triangles(base + uint32_t(comp[i].a), comp[i].b); };
     if (!c_.ordered) {
       for (int i = 0; i < count; ++i) draw(i);
     } else if (c_.orthographic) {
@@ -113,14 +143,14 @@ class Walker {
     } else {
       const double fe = leaf.f0 + glm::dot(leaf.g, c_.eye - glm::dvec3(Unpack(leaf.v0)));
       int split = 0;
-      while (split < count && c_.iso[block[split]->c] <= fe) ++split;
+      while (split < count && c_.iso[comp[split].c] <= fe) ++split;
       for (int i = count - 1; i >= split; --i) draw(i);
       for (int i = 0; i < split; ++i) draw(i);
     }
   }
 
   const Context& c_;
-  const extract_internal::CutPart& cut_;
+  const RetainedCutParts& cut_;
   OrderedMesh* out_;
   const std::function<void(const OrderedMesh&, size_t, size_t)>* ready_;
   const size_t ready_step_;
@@ -149,10 +179,10 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
 
   ExtractResult result;
   OrderedMesh& m = result.mesh;
-  m.positions = cut.positions_;
-  m.normals = cut.normals_;
-  m.triangles.resize(3 * cut.triangles_);
-  m.surface.resize(cut.triangles_);
+  m.positions = cut.mesh_.positions;
+  m.normals = cut.mesh_.normals;
+  m.triangles.resize(cut.mesh_.triangles.size());
+  m.surface.resize(cut.mesh_.surface.size());
 
   int roots[kNumInitialTets];
   if (c.ordered) {
@@ -165,7 +195,8 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
   // Prefixes are reported every few thousand triangles, as the extraction's subtrees report
   // them, so the first chunk can leave early; stopping is checked per initial tetrahedron
   // (a whole frame is drawn in tens of milliseconds).
-  Walker walker(c, cut.cut_, &m, observer ? &observer->on_ready : nullptr, 4096);
+  const RetainedCutParts parts{cut.mesh_, cut.parts_, cut.part_first_triangle_};
+  Walker walker(c, parts, &m, observer ? &observer->on_ready : nullptr, 4096);
   for (int i : roots) {
     if (observer) {
       if (observer->cancel && observer->cancel->load(std::memory_order_relaxed))
@@ -173,12 +204,12 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
       if (std::chrono::steady_clock::now() > observer->deadline)
         return absl::DeadlineExceededError("extraction passed its deadline");
     }
-    walker.Subtree(cut.root_begin_[i], cut.root_end_[i]);
+    walker.Subtree(cut.top_, 0, cut.root_begin_[i], cut.root_end_[i]);
   }
   walker.Report();
-  if (walker.written() != cut.triangles_)
+  if (walker.written() != cut.mesh_.triangle_count())
     return absl::InternalError("retained cut drew " + std::to_string(walker.written()) + " of " +
-                               std::to_string(cut.triangles_) + " triangles");
+                               std::to_string(cut.mesh_.triangle_count()) + " triangles");
 
   ExtractStats& st = result.stats;
   st.eps_used = cut.eps_;

@@ -13,7 +13,6 @@
 #include <vector>
 
 #include "server/extract/append_buffer.h"
-#include "server/extract/cut_recorder.h"
 
 namespace isostream::extract_internal {
 
@@ -25,7 +24,6 @@ struct SubtreeMesh {
   AppendBuffer<uint32_t> triangles;
   AppendBuffer<uint8_t> surface;
   std::vector<std::pair<uint32_t, uint64_t>> boundary;  // (local vertex, edge key)
-  CutPart cut;  // when the frame is retained (retained_cut.h)
   uint32_t vertices = 0;
   int64_t visited = 0;
   int64_t leaves = 0;
@@ -34,8 +32,7 @@ struct SubtreeMesh {
   size_t capacity_bytes() const {
     return (positions.capacity() + normals.capacity()) * sizeof(float) +
            triangles.capacity() * sizeof(uint32_t) + surface.capacity() +
-           boundary.capacity() * sizeof(boundary[0]) +
-           cut.records.capacity() * sizeof(CutRecord);
+           boundary.capacity() * sizeof(boundary[0]);
   }
   void clear() {
     positions.clear();
@@ -43,7 +40,6 @@ struct SubtreeMesh {
     triangles.clear();
     surface.clear();
     boundary.clear();
-    cut.clear();
     vertices = 0;
     visited = leaves = 0;
   }

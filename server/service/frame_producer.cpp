@@ -276,13 +276,14 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   remembering.budget_memo = &volume.budget_memo;
   const RetainedCut* same_mesh = retained ? retained->Find(volume, remembering) : nullptr;
   RetainedCut fresh_cut;
-  const bool retain = retained && !same_mesh && retained->enabled();
+  const bool retain = retained && !same_mesh && retained->ShouldRecord(volume, remembering);
   auto result = same_mesh ? Reorder(*same_mesh, request.view, request.order, &observer)
                           : Extract(*volume.prepared.hierarchy, volume.prepared.grid_to_world,
                                     remembering, &observer, retain ? &fresh_cut : nullptr);
   if (result.ok() && same_mesh) counters_->frames_reordered.fetch_add(1);
   // Kept only whole: a frame stopped part way leaves the cut empty, and the one before stays.
   if (result.ok() && retain && !fresh_cut.empty()) retained->Keep(volume, std::move(fresh_cut));
+  if (result.ok() && retained) retained->Drew(volume, remembering);
   bool last_cut = false;
   if (result.ok()) *stats_out = result->stats;
   if (result.ok() && !cancel->load() && wait_for_room()) {

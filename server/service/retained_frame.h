@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <utility>
+#include <vector>
 
 #include "server/extract/retained_cut.h"
 #include "server/service/catalogue.h"
@@ -47,6 +48,18 @@ class RetainedFrame {
   // Whether frames are retained at all (a limit of 0 turns it off).
   bool enabled() const { return budget_ != nullptr && budget_->limit() > 0; }
 
+  // Whether the refined frame about to be extracted for `request` should be recorded: when it
+  // draws the mesh the stream's previous refined frame drew, i.e. the client is moving around
+  // one mesh. Recording costs an extraction ~15-30% more, which a client that changes the
+  // isovalues or eps with every view (a slider) would pay for nothing.
+  bool ShouldRecord(const ServedVolume& volume, const ExtractRequest& request) const {
+    return enabled() && last_.Same(volume, request);
+  }
+  // The mesh of the refined frame just drawn (extracted or re-ordered).
+  void Drew(const ServedVolume& volume, const ExtractRequest& request) {
+    last_ = MeshKey(volume, request);
+  }
+
   // The retained cut if it draws `request` on `volume` as prepared now, else null.
   const RetainedCut* Find(const ServedVolume& volume, const ExtractRequest& request) const {
     if (charged_ == 0) return nullptr;
@@ -78,7 +91,29 @@ class RetainedFrame {
   }
 
  private:
+  // What identifies a frame's mesh, whatever its view.
+  struct MeshKey {
+    MeshKey() = default;
+    MeshKey(const ServedVolume& volume, const ExtractRequest& r)
+        : hierarchy(volume.prepared.hierarchy.get()),
+          isovalues(r.isovalues),
+          eps(r.budget > 0 ? 0.0 : r.eps),
+          budget(r.budget),
+          normals(r.normals) {}
+    bool Same(const ServedVolume& volume, const ExtractRequest& r) const {
+      const MeshKey k(volume, r);
+      return hierarchy != nullptr && k.hierarchy == hierarchy && k.isovalues == isovalues &&
+             k.eps == eps && k.budget == budget && k.normals == normals;
+    }
+    const Hierarchy* hierarchy = nullptr;  // compared only, never read
+    std::vector<float> isovalues;
+    double eps = 0;
+    int64_t budget = 0;
+    NormalMode normals = NormalMode::kSmooth;
+  };
+
   RetainBudget* budget_;
+  MeshKey last_;
   // The volume as prepared when the frame was extracted: re-prepared, it is another mesh.
   std::weak_ptr<const Hierarchy> hierarchy_;
   RetainedCut cut_;
