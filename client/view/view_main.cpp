@@ -26,6 +26,7 @@
 #include "client/render/headless_context.h"
 #include "client/render/image.h"
 #include "client/render/mesh_renderer.h"
+#include "client/view/frame_upload.h"
 #include "client/view/view_request.h"
 #include "client/view/window_view.h"
 #include "shared/number_list.h"
@@ -127,17 +128,7 @@ absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_
   while (session.Read(&chunk)) {
     watchdog.Touch();
     if (chunk.frame_id() != request_id) continue;  // an older view's frame, superseded
-    const size_t before = assembler.frame().mesh.triangle_count();
-    const bool starts = chunk.chunk_index() == 0;
-    ISOSTREAM_RETURN_IF_ERROR(assembler.Add(chunk));
-    if (starts) {
-      renderer.BeginFrame();
-      frame_open = true;
-    }
-    const net::Frame& f = assembler.frame();
-    if (frame_open && f.mesh.triangle_count() > before)
-      ISOSTREAM_RETURN_IF_ERROR(
-          renderer.AddChunk(f.mesh, before, f.mesh.triangle_count() - before));
+    ISOSTREAM_RETURN_IF_ERROR(AddAndUpload(assembler, chunk, renderer, &frame_open));
     if (!assembler.complete()) continue;
     ISOSTREAM_RETURN_IF_ERROR(renderer.EndFrame());
     frame_open = false;

@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "client/render/image.h"
+#include "client/view/frame_upload.h"
 
 namespace isostream::view {
 namespace {
@@ -248,18 +249,10 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
         ::isostream::v1::FrameChunk chunk = std::move(inbox.chunks.front());
         inbox.chunks.pop_front();
         if (chunk.frame_id() != request_id) continue;  // superseded by a newer view
-        const size_t before = assembler.frame().mesh.triangle_count();
-        const bool starts = chunk.chunk_index() == 0;
-        result = assembler.Add(chunk);
+        result = AddAndUpload(assembler, chunk, **renderer, &frame_open);
         if (!result.ok()) break;
-        if (starts) {
-          (*renderer)->BeginFrame();
-          frame_open = true;
-        }
         const net::Frame& f = assembler.frame();
-        if (frame_open && f.mesh.triangle_count() > before)
-          result = (*renderer)->AddChunk(f.mesh, before, f.mesh.triangle_count() - before);
-        if (result.ok() && assembler.complete()) {
+        if (assembler.complete()) {
           result = (*renderer)->EndFrame();
           frame_open = false;
           if (!f.coarse) ++refined_frames;

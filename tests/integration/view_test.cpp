@@ -94,6 +94,48 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   }
 }
 
+// An orbit around one mesh: from its third view the daemon re-orders its last frame instead of
+// extracting (FrameStats.reordered); the pictures are pixel for pixel those of a daemon that
+// retains nothing and extracts every view.
+TEST(View, ReorderedOrbitDrawsWhatExtractionDraws) {
+  testing::ScratchDir dir;
+  testing::DaemonProcess retaining, extracting;
+  ASSERT_TRUE(retaining.Start({"--no-cache"}, dir.path() + "/retaining.log"));
+  ASSERT_TRUE(extracting.Start({"--no-cache", "--retain-mb", "0"}, dir.path() + "/extracting.log"));
+  const std::string args =
+      " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.004 --eye 2.2,1.6,2.8 --orbit 4"
+      " --size 160x120 -o ";
+  const ViewRun a = View("--server " + retaining.address() + args + dir.path() + "/r.png");
+  ASSERT_EQ(a.code, 0) << a.output;
+  const ViewRun b = View("--server " + extracting.address() + args + dir.path() + "/e.png");
+  ASSERT_EQ(b.code, 0) << b.output;
+  for (int i = 0; i < 4; ++i) {
+    SCOPED_TRACE(i);
+    const std::string n = "_00" + std::to_string(i) + ".png";
+    auto r = render::ReadPng(dir.path() + "/r" + n), e = render::ReadPng(dir.path() + "/e" + n);
+    ASSERT_TRUE(r.ok() && e.ok());
+    EXPECT_GT(Coverage(*r), 0.05);
+    ASSERT_EQ(r->rgba.size(), e->rgba.size());
+    size_t differing = 0;
+    for (size_t p = 0; p < r->rgba.size(); ++p) differing += r->rgba[p] != e->rgba[p];
+    EXPECT_EQ(differing, 0u);
+  }
+  // The retaining daemon did re-order (views 3 and 4); the other never did.
+  auto stats = [](const testing::DaemonProcess& d) {
+    net::ClientOptions o;
+    o.address = d.address();
+    auto c = net::Client::Connect(o);
+    EXPECT_TRUE(c.ok());
+    auto s = (*c)->GetServerStats();
+    EXPECT_TRUE(s.ok());
+    return s.ok() ? *s : ::isostream::v1::ServerStats();
+  };
+  EXPECT_EQ(stats(retaining).frames_reordered(), 2);
+  EXPECT_EQ(stats(extracting).frames_reordered(), 0);
+  EXPECT_EQ(retaining.Stop(), 0);
+  EXPECT_EQ(extracting.Stop(), 0);
+}
+
 // --window under a virtual X server (xvfb-run, installed by scripts/install-deps.sh): the
 // window opens, shows the refined frame, and its screenshot has the surfaces in it.
 TEST(View, WindowModeShowsTheFrameUnderXvfb) {
