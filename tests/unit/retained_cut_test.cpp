@@ -19,6 +19,9 @@ using testing::BlobsField;
 using testing::CayleyField;
 using testing::SphereField;
 
+// Grid to world as a served volume has it: not the identity.
+const GridToWorld kXf{glm::dvec3(-1.0, -0.75, -1.25), glm::dvec3(2.0 / 64, 2.0 / 64, 2.5 / 64)};
+
 struct Case {
   HierarchyPtr h;
   std::vector<float> iso;
@@ -61,15 +64,16 @@ void ExpectSameDrawing(const OrderedMesh& fresh, const OrderedMesh& reordered,
   }
 }
 
-View Perspective(glm::dvec3 eye) {
+// Views given in grid units, placed in the world as kXf places the grid.
+View Perspective(glm::dvec3 grid_eye) {
   View v;
-  v.eye = eye;
+  v.eye = kXf.origin + kXf.spacing * grid_eye;
   return v;
 }
-View Orthographic(glm::dvec3 direction) {
+View Orthographic(glm::dvec3 grid_direction) {
   View v;
   v.orthographic = true;
-  v.direction = direction;
+  v.direction = kXf.spacing * grid_direction;
   return v;
 }
 
@@ -93,7 +97,7 @@ TEST(RetainedCut, ReorderedForAnotherViewEqualsAFreshExtraction) {
           r.threads = 2;
           r.view = Perspective({-0.7 * n, 2.1 * n, 1.3 * n});
           RetainedCut cut;
-          auto first = Extract(h, GridToWorld{}, r, nullptr, &cut);
+          auto first = Extract(h, kXf, r, nullptr, &cut);
           ASSERT_TRUE(first.ok()) << first.status();
           ASSERT_GT(first->mesh.triangle_count(), 50u) << vol.name;
           ASSERT_TRUE(cut.Serves(r));
@@ -115,7 +119,7 @@ TEST(RetainedCut, ReorderedForAnotherViewEqualsAFreshExtraction) {
             ExtractRequest fresh_request = r;
             fresh_request.view = view;
             fresh_request.order = order;
-            auto fresh = Extract(h, GridToWorld{}, fresh_request);
+            auto fresh = Extract(h, kXf, fresh_request);
             ASSERT_TRUE(fresh.ok()) << fresh.status();
             auto reordered = Reorder(cut, view, order);
             ASSERT_TRUE(reordered.ok()) << reordered.status();
@@ -141,7 +145,7 @@ TEST(RetainedCut, AnotherViewChangesTheOrder) {
   r.isovalues = {0.2f, 0.5f, 0.8f};
   r.view = Perspective({-30, 70, 40});
   RetainedCut cut;
-  auto a = Extract(*h, GridToWorld{}, r, nullptr, &cut);
+  auto a = Extract(*h, kXf, r, nullptr, &cut);
   ASSERT_TRUE(a.ok());
   auto b = Reorder(cut, Perspective({70, -30, -20}));
   ASSERT_TRUE(b.ok());
