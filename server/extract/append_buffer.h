@@ -12,6 +12,20 @@ namespace isostream {
 template <typename T>
 class AppendBuffer {
  public:
+  AppendBuffer() = default;
+  // Moved-from buffers are empty (a defaulted move left the size and capacity of a null array).
+  AppendBuffer(AppendBuffer&& o) noexcept
+      : data_(std::move(o.data_)), size_(o.size_), capacity_(o.capacity_) {
+    o.size_ = o.capacity_ = 0;
+  }
+  AppendBuffer& operator=(AppendBuffer&& o) noexcept {
+    data_ = std::move(o.data_);
+    size_ = o.size_;
+    capacity_ = o.capacity_;
+    o.size_ = o.capacity_ = 0;
+    return *this;
+  }
+
   T* Extend(size_t count) {
     if (size_ + count > capacity_) Grow(size_ + count);
     T* out = data_.get() + size_;

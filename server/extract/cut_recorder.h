@@ -32,7 +32,6 @@ struct CutRecord {
   // kRefine: the class. kComponent: the sorted isovalue index (Context::iso).
   uint8_t c;
   bool child0_drawn_first;  // kRefine: in the recorded order
-  uint8_t unused = 0;
 };
 static_assert(sizeof(CutRecord) == 16);
 

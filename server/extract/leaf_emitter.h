@@ -104,7 +104,7 @@ class LeafEmitter {
       for (int i = first; i < last; ++i) order[count++] = descending ? last - 1 - (i - first) : i;
     } else {
       // Isovalues above f_T(eye), highest first; then those at or below it, lowest first.
-      const double fe = t.f[0] + glm::dot(LeafGradient(t), c_.eye - glm::dvec3(Unpack(t.v[0])));
+      const double fe = FieldAtEye(c_, LeafGradient(t), t.f[0], t.v[0]);
       int split = first;
       while (split < last && c_.iso[split] <= fe) ++split;
       for (int i = last - 1; i >= split; --i) order[count++] = i;

@@ -16,7 +16,6 @@ using extract_internal::ChildZeroFirst;
 using extract_internal::Context;
 using extract_internal::CutRecord;
 using extract_internal::MultiLeaf;
-using extract_internal::Unpack;
 
 bool RetainedCut::Serves(const ExtractRequest& r, double budget_eps) const {
   if (empty()) return false;
@@ -62,10 +61,11 @@ struct RetainedCutParts {
 // Writes what one walk of the records draws, far to near, into `out` (sized for the frame).
 class Walker {
  public:
-  // `ready` (may be empty) hears of drawn prefixes every `ready_step` triangles or so.
+  // `observer` (may be null) hears of drawn prefixes every `ready_step` triangles or so, and
+  // can stop the walk at each of them.
   Walker(const Context& c, const RetainedCutParts& cut, OrderedMesh* out,
-         const std::function<void(const OrderedMesh&, size_t, size_t)>* ready, size_t ready_step)
-      : c_(c), cut_(cut), out_(out), ready_(ready), ready_step_(ready_step) {}
+         const ExtractObserver* observer, size_t ready_step)
+      : c_(c), cut_(cut), out_(out), observer_(observer), ready_step_(ready_step) {}
 
   // The subtree in records [begin, end) of `part`, whose triangle numbers start at `base`.
   void Subtree(const extract_internal::CutPart& part, uint32_t base, uint32_t begin,
@@ -96,19 +96,31 @@ class Walker {
         } else {  // kPart: a subtree of the split, in its own records
           const extract_internal::CutPart& sub = cut_.parts[r.a];
           Subtree(sub, cut_.first_triangle[r.a], 0, uint32_t(sub.records.size()));
+          if (!stop_.ok()) return;
         }
-        if (written_ - reported_ >= ready_step_) Report();
+        if (written_ - reported_ >= ready_step_) {
+          Report();
+          if (!stop_.ok()) return;
+        }
       }
       if (top == 0) return;
       cur = stack[--top];
     }
   }
 
-  // Reports triangles drawn since the last report.
+  // Reports triangles drawn since the last report, and whether the observer stops the walk
+  // (cancelled, or past its deadline: stop()).
   void Report() {
-    if (ready_ && *ready_ && written_ > reported_) (*ready_)(*out_, reported_, written_);
+    if (observer_ == nullptr) return;
+    if (observer_->on_ready && written_ > reported_)
+      observer_->on_ready(*out_, reported_, written_);
     reported_ = written_;
+    if (observer_->cancel && observer_->cancel->load(std::memory_order_relaxed))
+      stop_ = absl::CancelledError("extraction cancelled");
+    else if (std::chrono::steady_clock::now() > observer_->deadline)
+      stop_ = absl::DeadlineExceededError("extraction passed its deadline");
   }
+  const absl::Status& stop() const { return stop_; }
 
   int64_t walked() const { return walked_; }
   size_t written() const { return written_; }
@@ -141,7 +153,7 @@ class Walker {
       const bool descending = glm::dot(leaf.g, c_.dir) > 0;
       for (int i = 0; i < count; ++i) draw(descending ? count - 1 - i : i);
     } else {
-      const double fe = leaf.f0 + glm::dot(leaf.g, c_.eye - glm::dvec3(Unpack(leaf.v0)));
+      const double fe = extract_internal::FieldAtEye(c_, leaf.g, leaf.f0, leaf.v0);
       int split = 0;
       while (split < count && c_.iso[comp[split].c] <= fe) ++split;
       for (int i = count - 1; i >= split; --i) draw(i);
@@ -152,8 +164,9 @@ class Walker {
   const Context& c_;
   const RetainedCutParts& cut_;
   OrderedMesh* out_;
-  const std::function<void(const OrderedMesh&, size_t, size_t)>* ready_;
+  const ExtractObserver* observer_;
   const size_t ready_step_;
+  absl::Status stop_;
   int64_t walked_ = 0;
   size_t written_ = 0, reported_ = 0;
 };
@@ -193,20 +206,16 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
     std::iota(roots, roots + kNumInitialTets, 0);
   }
   // Prefixes are reported every few thousand triangles, as the extraction's subtrees report
-  // them, so the first chunk can leave early; stopping is checked per initial tetrahedron
-  // (a whole frame is drawn in tens of milliseconds).
+  // them, so the first chunk can leave early; a stop is heard at each report.
   const RetainedCutParts parts{cut.mesh_, cut.parts_, cut.part_first_triangle_};
-  Walker walker(c, parts, &m, observer ? &observer->on_ready : nullptr, 4096);
+  Walker walker(c, parts, &m, observer, 4096);
+  walker.Report();  // stopped before it began
   for (int i : roots) {
-    if (observer) {
-      if (observer->cancel && observer->cancel->load(std::memory_order_relaxed))
-        return absl::CancelledError("extraction cancelled");
-      if (std::chrono::steady_clock::now() > observer->deadline)
-        return absl::DeadlineExceededError("extraction passed its deadline");
-    }
+    if (!walker.stop().ok()) return walker.stop();
     walker.Subtree(cut.top_, 0, cut.root_begin_[i], cut.root_end_[i]);
   }
-  walker.Report();
+  if (walker.stop().ok()) walker.Report();
+  if (!walker.stop().ok()) return walker.stop();
   if (walker.written() != cut.mesh_.triangle_count())
     return absl::InternalError("retained cut drew " + std::to_string(walker.written()) + " of " +
                                std::to_string(cut.mesh_.triangle_count()) + " triangles");

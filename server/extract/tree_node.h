@@ -174,6 +174,12 @@ inline double Wavelet(const Context& c, float fx, float f0, float f3, int level)
   return (double(fx) - 0.5 * (double(f0) + double(f3))) * c.inv_unit[level];
 }
 
+// The leaf's linear field at the eye, which orders its components under perspective (§4.3):
+// one expression for the traversal and for re-ordering a retained cut, so both decide alike.
+inline double FieldAtEye(const Context& c, const glm::dvec3& g, float f0, PackedPoint v0) {
+  return f0 + glm::dot(g, c.eye - glm::dvec3(Unpack(v0)));
+}
+
 // The children of t in draw order: the farther one (drawn first) in *first.
 inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
   const ReferenceTet& rt = (*c.tables)[t.cls];

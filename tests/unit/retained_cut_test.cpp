@@ -182,6 +182,18 @@ TEST(RetainedCut, ObserverSeesContiguousPrefixes) {
   }
   EXPECT_EQ(expected_first, b->mesh.triangle_count());
   EXPECT_LT(ranges[0].second, 4096u + 64);  // the first prefix is small
+
+  // A stop heard part way (a newer view) ends the walk at the next prefix.
+  std::atomic<bool> cancel{false};
+  size_t reports = 0;
+  observer.cancel = &cancel;
+  observer.on_ready = [&](const OrderedMesh&, size_t, size_t) {
+    ++reports;
+    cancel = true;
+  };
+  auto stopped = Reorder(cut, Perspective({70, -30, -20}), DrawOrder::kBackToFront, &observer);
+  EXPECT_EQ(stopped.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_EQ(reports, 1u);
 }
 
 TEST(RetainedCut, ServesOnlyTheSameMesh) {
