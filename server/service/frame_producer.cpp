@@ -275,15 +275,12 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   ExtractRequest remembering = request;  // budget -> eps is the same for every view
   remembering.budget_memo = &volume.budget_memo;
   const RetainedCut* same_mesh = retained ? retained->Find(volume, remembering) : nullptr;
-  RetainedCut fresh_cut;
-  const bool retain = retained && !same_mesh && retained->ShouldRecord(volume, remembering);
+  RetainedCut* recording =
+      retained && !same_mesh ? retained->StartRecording(volume, remembering) : nullptr;
   auto result = same_mesh ? Reorder(*same_mesh, request.view, request.order, &observer)
                           : Extract(*volume.prepared.hierarchy, volume.prepared.grid_to_world,
-                                    remembering, &observer, retain ? &fresh_cut : nullptr);
+                                    remembering, &observer, recording);
   if (result.ok() && same_mesh) counters_->frames_reordered.fetch_add(1);
-  // Kept only whole: a frame stopped part way leaves the cut empty, and the one before stays.
-  if (result.ok() && retain && !fresh_cut.empty()) retained->Keep(volume, std::move(fresh_cut));
-  if (result.ok() && retained) retained->Drew(volume, remembering);
   bool last_cut = false;
   if (result.ok()) *stats_out = result->stats;
   if (result.ok() && !cancel->load() && wait_for_room()) {
@@ -298,6 +295,11 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   const bool complete =
       last_cut && error.ok() && !state.superseded && state.released == state.chunks.size();
   lock.unlock();
+  // The mesh is whole when the extraction ran to its end and nothing refused the frame after
+  // (over max_triangles, say), even if a newer view superseded it on the way out.
+  const bool whole_mesh = result.ok() && error.ok();
+  if (recording) retained->EndRecording(volume, whole_mesh);
+  if (retained && whole_mesh) retained->Drew(volume, remembering, result->stats.triangles);
   if (complete) return absl::OkStatus();
   if (!error.ok()) return error;
   if (!result.ok() && result.status().code() == absl::StatusCode::kDeadlineExceeded)

@@ -4,6 +4,7 @@
 // the memory all streams keep so (frames.retain_mb).
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -37,56 +38,82 @@ class RetainBudget {
   const int64_t limit_;
 };
 
-// One stream's retained frame. Used by the stream's one running job at a time: no lock.
+// One stream's retained frame. Used by the stream's one running job at a time: no lock. Its
+// buffers, kept or not, are charged to the budget for what they hold (their capacity), from
+// before a frame is recorded into them (an estimate, settled after) until they are freed.
 class RetainedFrame {
  public:
   explicit RetainedFrame(RetainBudget* budget) : budget_(budget) {}
-  ~RetainedFrame() { Clear(); }
+  ~RetainedFrame() { Drop(); }
   RetainedFrame(const RetainedFrame&) = delete;
   RetainedFrame& operator=(const RetainedFrame&) = delete;
 
-  // Whether frames are retained at all (a limit of 0 turns it off).
-  bool enabled() const { return budget_ != nullptr && budget_->limit() > 0; }
-
-  // Whether the refined frame about to be extracted for `request` should be recorded: when it
-  // draws the mesh the stream's previous refined frame drew, i.e. the client is moving around
-  // one mesh. Recording costs an extraction ~15-30% more, which a client that changes the
-  // isovalues or eps with every view (a slider) would pay for nothing.
-  bool ShouldRecord(const ServedVolume& volume, const ExtractRequest& request) const {
-    return enabled() && last_.Same(volume, request);
-  }
-  // The mesh of the refined frame just drawn (extracted or re-ordered).
-  void Drew(const ServedVolume& volume, const ExtractRequest& request) {
-    last_ = MeshKey(volume, request);
-  }
-
-  // The retained cut if it draws `request` on `volume` as prepared now, else null.
-  const RetainedCut* Find(const ServedVolume& volume, const ExtractRequest& request) const {
-    if (charged_ == 0) return nullptr;
+  // The retained cut if it draws `request` on `volume` as prepared now, else null. A cut of a
+  // volume re-prepared or dropped since is freed.
+  const RetainedCut* Find(const ServedVolume& volume, const ExtractRequest& request) {
+    if (!holds_frame_) return nullptr;
     const HierarchyPtr h = hierarchy_.lock();
-    if (h == nullptr || h != volume.prepared.hierarchy) return nullptr;
+    if (h == nullptr || h != volume.prepared.hierarchy) {
+      Drop();
+      return nullptr;
+    }
     double budget_eps = -1;
     if (request.budget > 0)
       budget_eps = volume.budget_memo.Find(request.isovalues, request.budget).value_or(-1.0);
     return cut_.Serves(request, budget_eps) ? &cut_ : nullptr;
   }
 
-  // Keeps `cut`, the frame just extracted on `volume`, in place of the one before, if the
-  // daemon's budget has room for it; otherwise keeps nothing.
-  void Keep(const ServedVolume& volume, RetainedCut&& cut) {
-    Clear();
-    const int64_t bytes = int64_t(cut.memory_bytes());
-    if (bytes == 0 || budget_ == nullptr || !budget_->Take(bytes)) return;
-    cut_ = std::move(cut);
-    hierarchy_ = volume.prepared.hierarchy;
-    charged_ = bytes;
+  // Where to record the refined frame about to be extracted for `request`, or null. A frame is
+  // recorded when the stream's previous refined frame drew the same mesh (a client moving
+  // around one mesh; recording costs the extraction up to ~20%, which a client changing the
+  // isovalues or eps with every view would pay for nothing), and when the budget has room for
+  // a frame of the previous one's size.
+  RetainedCut* StartRecording(const ServedVolume& volume, const ExtractRequest& request) {
+    if (budget_ == nullptr || budget_->limit() <= 0 || !last_.Same(volume, request))
+      return nullptr;
+    // ~56 bytes per triangle measured (vertices, triangles, records); the reserve is settled
+    // against what the buffers hold once the frame is in.
+    const int64_t estimate = std::max<int64_t>(64 * last_triangles_, 1 << 16);
+    if (estimate > charged_) {
+      if (!budget_->Take(estimate - charged_)) {
+        Drop();  // no room: free what this stream held as well
+        return nullptr;
+      }
+      charged_ = estimate;
+    }
+    holds_frame_ = false;  // the buffers are being rewritten
+    return &cut_;
   }
 
-  void Clear() {
-    if (charged_ == 0) return;
+  // The recording StartRecording began is over: `whole` if the frame was drawn completely (a
+  // frame stopped part way, or refused after it ran, is not kept).
+  void EndRecording(const ServedVolume& volume, bool whole) {
+    const int64_t held = int64_t(cut_.memory_bytes());
+    if (held > charged_ && !budget_->Take(held - charged_)) {
+      Drop();
+      return;
+    }
+    if (held < charged_) budget_->Give(charged_ - held);
+    charged_ = held;
+    holds_frame_ = whole && !cut_.empty();
+    if (holds_frame_) hierarchy_ = volume.prepared.hierarchy;
+  }
+
+  // A refined frame of `request` was drawn (extracted or re-ordered), with `triangles`. When
+  // the stream has moved on to another mesh, what it held (a frame, or buffers of an unfinished
+  // one) is freed.
+  void Drew(const ServedVolume& volume, const ExtractRequest& request, int64_t triangles) {
+    if (charged_ > 0 && Find(volume, request) == nullptr && !last_.Same(volume, request)) Drop();
+    last_ = MeshKey(volume, request);
+    last_triangles_ = triangles;
+  }
+
+  // Frees the buffers and gives their memory back to the budget.
+  void Drop() {
     cut_ = RetainedCut();
     hierarchy_.reset();
-    budget_->Give(charged_);
+    holds_frame_ = false;
+    if (charged_ > 0) budget_->Give(charged_);
     charged_ = 0;
   }
 
@@ -113,11 +140,13 @@ class RetainedFrame {
   };
 
   RetainBudget* budget_;
-  MeshKey last_;
+  MeshKey last_;  // the mesh of the last refined frame drawn
+  int64_t last_triangles_ = 0;
+  RetainedCut cut_;
+  bool holds_frame_ = false;  // cut_ holds a whole frame of the volume below
   // The volume as prepared when the frame was extracted: re-prepared, it is another mesh.
   std::weak_ptr<const Hierarchy> hierarchy_;
-  RetainedCut cut_;
-  int64_t charged_ = 0;  // bytes taken from the budget; 0: nothing retained
+  int64_t charged_ = 0;  // bytes taken from the budget for cut_'s buffers
 };
 
 }  // namespace isostream::service

@@ -253,5 +253,77 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   EXPECT_EQ(limited.frame().mesh.triangle_count(), next - sink.chunks_.back().triangle_count());
 }
 
+// A stream's retained frame: recorded on the second refined frame of a mesh, charged to the
+// daemon's budget for what it holds, freed when the stream draws another mesh or the budget
+// has no room, and never kept from a frame that did not finish.
+TEST(RetainedFrame, RecordsKeepsAndFreesWithinTheBudget) {
+  CatalogueOptions o;
+  VolumeCatalogue catalogue(o);
+  auto volume = catalogue.Get("buckyball:65");
+  ASSERT_TRUE(volume.ok());
+  const ServedVolume& v = **volume;
+  ExtractRequest r;
+  r.isovalues = {0.05f, 0.15f};
+  r.eps = 0.004;
+  r.view.eye = {3, 2, 1};
+  auto extract = [&](RetainedCut* cut) {
+    auto res = Extract(*v.prepared.hierarchy, v.prepared.grid_to_world, r, nullptr, cut);
+    EXPECT_TRUE(res.ok());
+    return res.ok() ? res->stats.triangles : 0;
+  };
+
+  RetainBudget budget(int64_t{256} << 20);
+  {
+    RetainedFrame frame(&budget);
+    EXPECT_EQ(frame.StartRecording(v, r), nullptr);  // the first frame of a mesh
+    frame.Drew(v, r, extract(nullptr));
+    RetainedCut* cut = frame.StartRecording(v, r);  // the second
+    ASSERT_NE(cut, nullptr);
+    const int64_t triangles = extract(cut);
+    frame.EndRecording(v, true);
+    frame.Drew(v, r, triangles);
+    ASSERT_NE(frame.Find(v, r), nullptr);
+    EXPECT_EQ(budget.used(), int64_t(frame.Find(v, r)->memory_bytes()));
+    EXPECT_GT(budget.used(), 32 * triangles);
+
+    // A frame that did not finish is not kept, and what was held stays charged until freed.
+    ASSERT_NE(frame.StartRecording(v, r), nullptr);
+    frame.EndRecording(v, false);
+    EXPECT_EQ(frame.Find(v, r), nullptr);
+    EXPECT_GT(budget.used(), 0);
+
+    // Another mesh drawn: the old one is freed.
+    ExtractRequest other = r;
+    other.eps = 0.008;
+    frame.Drew(v, other, 1000);
+    EXPECT_EQ(budget.used(), 0);
+    EXPECT_EQ(frame.Find(v, r), nullptr);
+    frame.Drew(v, r, triangles);
+    cut = frame.StartRecording(v, r);
+    ASSERT_NE(cut, nullptr);
+    extract(cut);
+    frame.EndRecording(v, true);
+    EXPECT_NE(frame.Find(v, r), nullptr);
+  }
+  EXPECT_EQ(budget.used(), 0);  // the stream's end gives everything back
+
+  // No room in the budget: nothing is recorded, nothing stays charged.
+  RetainBudget small(4096);
+  RetainedFrame frame(&small);
+  frame.Drew(v, r, 50000);
+  EXPECT_EQ(frame.StartRecording(v, r), nullptr);
+  EXPECT_EQ(small.used(), 0);
+  // An estimate that fits but a frame that does not: dropped when it is settled.
+  RetainBudget tight(int64_t{1} << 20);
+  RetainedFrame tight_frame(&tight);
+  tight_frame.Drew(v, r, 100);
+  RetainedCut* cut = tight_frame.StartRecording(v, r);
+  ASSERT_NE(cut, nullptr);
+  extract(cut);
+  tight_frame.EndRecording(v, true);
+  EXPECT_EQ(tight_frame.Find(v, r), nullptr);
+  EXPECT_EQ(tight.used(), 0);
+}
+
 }  // namespace
 }  // namespace isostream::service
