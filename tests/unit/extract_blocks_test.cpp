@@ -18,21 +18,13 @@ namespace {
 using testing::BlobsField;
 using testing::CayleyField;
 
-struct Case {
-  HierarchyPtr h;
-  std::vector<float> iso;
-  std::string name;
-};
+using Case = testing::VolumeCase;
 
 std::vector<Case> Volumes() {
   std::vector<Case> v;
   v.push_back({testing::MakeHierarchy(4, CayleyField), {-0.3f, 0.05f, 0.4f}, "cayley 17^3"});
   v.push_back({testing::MakeHierarchy(5, BlobsField), {0.2f, 0.5f, 0.8f}, "blobs 33^3"});
-  // Data box 13 x 17 x 11 in a 17^3 cube: blocks straddling it fall back to node by node.
-  PaddedSamples s = testing::MakeSamples(4, CayleyField);
-  s.data_dims = {13, 17, 11};
-  auto clipped = BuildHierarchy(std::move(s));
-  v.push_back({clipped.ok() ? *clipped : nullptr, {-0.3f, 0.05f, 0.4f}, "cayley clipped"});
+  v.push_back(testing::ClippedCayley());
   return v;
 }
 

@@ -22,22 +22,14 @@ using testing::SphereField;
 // Grid to world as a served volume has it: not the identity.
 const GridToWorld kXf{glm::dvec3(-1.0, -0.75, -1.25), glm::dvec3(2.0 / 64, 2.0 / 64, 2.5 / 64)};
 
-struct Case {
-  HierarchyPtr h;
-  std::vector<float> iso;
-  std::string name;
-};
+using Case = testing::VolumeCase;
 
 std::vector<Case> Volumes() {
   std::vector<Case> v;
   v.push_back({testing::MakeHierarchy(5, CayleyField), {-0.3f, 0.05f, 0.4f}, "cayley 33^3"});
   v.push_back({testing::MakeHierarchy(5, BlobsField), {0.2f, 0.5f, 0.8f}, "blobs 33^3"});
   v.push_back({testing::MakeHierarchy(4, SphereField), {0.6f}, "sphere 17^3"});
-  // Data box 13 x 17 x 11 in a 17^3 cube: clipped leaves.
-  PaddedSamples s = testing::MakeSamples(4, CayleyField);
-  s.data_dims = {13, 17, 11};
-  auto clipped = BuildHierarchy(std::move(s));
-  v.push_back({clipped.ok() ? *clipped : nullptr, {-0.3f, 0.05f, 0.4f}, "cayley clipped"});
+  v.push_back(testing::ClippedCayley());
   return v;
 }
 
@@ -138,32 +130,35 @@ TEST(RetainedCut, ReorderedForAnotherViewEqualsAFreshExtraction) {
   EXPECT_GT(with_several_surfaces, 0);
 }
 
-// A view that orders the triangles differently: the test above compares something.
-TEST(RetainedCut, AnotherViewChangesTheOrder) {
-  const auto h = testing::MakeHierarchy(5, BlobsField);
+// Three nested blobs extracted from one view, their cut retained.
+ExtractResult RetainBlobs(RetainedCut* cut) {
+  static const HierarchyPtr h = testing::MakeHierarchy(5, BlobsField);
   ExtractRequest r;
   r.isovalues = {0.2f, 0.5f, 0.8f};
   r.view = Perspective({-30, 70, 40});
+  auto a = Extract(*h, kXf, r, nullptr, cut);
+  EXPECT_TRUE(a.ok()) << a.status();
+  return a.ok() ? std::move(*a) : ExtractResult{};
+}
+
+// A view that orders the triangles differently: the test above compares something.
+TEST(RetainedCut, AnotherViewChangesTheOrder) {
   RetainedCut cut;
-  auto a = Extract(*h, kXf, r, nullptr, &cut);
-  ASSERT_TRUE(a.ok());
+  const ExtractResult a = RetainBlobs(&cut);
   auto b = Reorder(cut, Perspective({70, -30, -20}));
   ASSERT_TRUE(b.ok());
-  ASSERT_EQ(a->mesh.triangle_count(), b->mesh.triangle_count());
+  ASSERT_EQ(a.mesh.triangle_count(), b->mesh.triangle_count());
   size_t moved = 0;
-  for (size_t t = 0; t < a->mesh.triangle_count(); ++t) moved += Corners(a->mesh, t) != Corners(b->mesh, t);
-  EXPECT_GT(moved, a->mesh.triangle_count() / 2);
+  for (size_t t = 0; t < a.mesh.triangle_count(); ++t)
+    moved += Corners(a.mesh, t) != Corners(b->mesh, t);
+  EXPECT_GT(moved, a.mesh.triangle_count() / 2);
 }
 
 // The observer hears of the re-ordered frame in contiguous prefixes, a few thousand triangles
 // at a time, as it does for an extraction: a stream cuts its first chunk from the first ones.
 TEST(RetainedCut, ObserverSeesContiguousPrefixes) {
-  const auto h = testing::MakeHierarchy(5, BlobsField);
-  ExtractRequest r;
-  r.isovalues = {0.2f, 0.5f, 0.8f};
-  r.view = Perspective({-30, 70, 40});
   RetainedCut cut;
-  ASSERT_TRUE(Extract(*h, GridToWorld{}, r, nullptr, &cut).ok());
+  RetainBlobs(&cut);
   ASSERT_GT(cut.triangle_count(), 3 * 4096u);
   std::vector<std::pair<size_t, size_t>> ranges;
   ExtractObserver observer;

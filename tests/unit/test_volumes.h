@@ -3,6 +3,9 @@
 
 #include <cmath>
 #include <functional>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "server/hierarchy/hierarchy.h"
 
@@ -41,6 +44,22 @@ inline float BlobsField(double x, double y, double z) {
 }
 inline float CayleyField(double x, double y, double z) {
   return float(16 * x * y * z + 4 * (x + y + z) - 1);
+}
+
+// A volume and the isovalues a test extracts from it.
+struct VolumeCase {
+  HierarchyPtr h;
+  std::vector<float> iso;
+  std::string name;
+};
+
+// Cayley's surface in a 13 x 17 x 11 data box inside a 17^3 cube: leaves straddling the box are
+// clipped (and blocks fall back to node by node there).
+inline VolumeCase ClippedCayley() {
+  PaddedSamples s = MakeSamples(4, CayleyField);
+  s.data_dims = {13, 17, 11};
+  auto clipped = BuildHierarchy(std::move(s));
+  return {clipped.ok() ? *clipped : nullptr, {-0.3f, 0.05f, 0.4f}, "cayley clipped"};
 }
 
 }  // namespace isostream::testing
