@@ -102,50 +102,12 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.blocks = &BlockTables::Get();
   c.block_level = r.blocks ? 3 * c.k - kBlockDepth : -1;
   c.cases = &MarchingTets::Get();
-  for (int i = 0; i < kNumTetClasses; ++i) c.negative[i] = (*c.tables)[TetClass{uint8_t(i)}].left_handed;
+  for (int i = 0; i < kNumTetClasses; ++i)
+    c.negative[i] = (*c.tables)[TetClass{uint8_t(i)}].left_handed;
   for (int level = 0; level <= 3 * c.k; ++level)
     c.inv_unit[level] = 2.0 / double((1 << c.k) >> (level / 3));
   return c;
 }
-
-// The refinements SplitIntoSubtrees makes above the subtrees, kept when the frame is retained:
-// replayed as a preorder walk, in the split's draw order, around the subtrees' own records.
-struct TopTree {
-  struct Entry {
-    extract_internal::PackedPoint x = 0;  // refinement vertex, once refined
-    TetClass cls;
-    bool child0_first = false;
-    int kids[2] = {-1, -1};  // in draw order, once refined
-    int item = -1;           // the subtree it became
-  };
-  struct Event {
-    enum Kind : uint8_t { kRootBegin, kRootEnd, kRefine, kSecond, kItem };
-    Kind kind;
-    int arg;  // kRoot*: initial tetrahedron; kRefine, kSecond: entry; kItem: subtree
-  };
-  std::vector<Entry> entries;
-  std::vector<std::pair<int, int>> roots;  // (initial tetrahedron, entry) in draw order
-  std::vector<Event> events;
-
-  void Walk() {
-    for (const auto& [initial, entry] : roots) {
-      events.push_back({Event::kRootBegin, initial});
-      Visit(entry);
-      events.push_back({Event::kRootEnd, initial});
-    }
-  }
-  void Visit(int e) {
-    const Entry& n = entries[e];
-    if (n.kids[0] >= 0) {
-      events.push_back({Event::kRefine, e});
-      Visit(n.kids[0]);
-      events.push_back({Event::kSecond, e});
-      Visit(n.kids[1]);
-    } else if (n.item >= 0) {
-      events.push_back({Event::kItem, n.item});
-    }
-  }
-};
 
 // Cuts the top of the tree into subtrees in draw order. Deterministic (independent of the
 // thread count) so the output is too. With a curve (a count pass that gathers one), the nodes
@@ -153,7 +115,7 @@ struct TopTree {
 // With `top`, the refinements are recorded there too.
 std::vector<Node> SplitIntoSubtrees(const Context& c,
                                     extract_internal::CountCurve* curve = nullptr,
-                                    TopTree* top = nullptr) {
+                                    extract_internal::SplitTree* top = nullptr) {
   const ReferenceTets& tables = *c.tables;
   const int size = 1 << c.k;
   int order[kNumInitialTets];
@@ -217,7 +179,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c,
       if (top) {
         const int e = ids[j], kid = int(top->entries.size());
         top->entries.resize(kid + 2);
-        TopTree::Entry& n = top->entries[e];
+        extract_internal::SplitTree::Entry& n = top->entries[e];
         n.x = (t.v[0] + t.v[3]) >> 1;
         n.cls = t.cls;
         n.child0_first = t.child0_first;
@@ -379,7 +341,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   const Context c = MakeContext(h, xf, r, eps);
 
   auto t0 = std::chrono::steady_clock::now();
-  TopTree top;
+  extract_internal::SplitTree top;
   const std::vector<Node> items = SplitIntoSubtrees(c, nullptr, retain ? &top : nullptr);
   st.split_ms = Ms(t0);
   st.subtrees = int(items.size());
@@ -418,43 +380,16 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   double join_ms = 0;
   size_t appended = 0;  // parts
 
-  // Retaining: the top's records up to subtree `item` (to the end for -1), then the
-  // subtree's own, in preorder.
-  size_t next_event = 0;
-  std::vector<uint32_t> top_record(top.entries.size());
   if (retain) {
     // Each subtree records into its own part; the parts keep their buffers across frames.
     retain->parts_.resize(items.size());
     for (extract_internal::CutPart& part : retain->parts_) part.clear();
     retain->part_first_triangle_.assign(items.size(), 0);
   }
+  // Retaining: the split's records up to subtree `item` (to the end for -1), with a kPart
+  // record for the subtree's own.
   auto record_top = [&](int item) {
-    extract_internal::CutPart& cut = retain->top_;
-    for (; next_event < top.events.size(); ++next_event) {
-      const TopTree::Event& e = top.events[next_event];
-      switch (e.kind) {
-        case TopTree::Event::kRootBegin:
-          retain->root_begin_[e.arg] = uint32_t(cut.records.size());
-          break;
-        case TopTree::Event::kRootEnd:
-          retain->root_end_[e.arg] = uint32_t(cut.records.size());
-          break;
-        case TopTree::Event::kRefine: {
-          const TopTree::Entry& n = top.entries[e.arg];
-          top_record[e.arg] = cut.AddRefine(n.x, n.cls, n.child0_first);
-          break;
-        }
-        case TopTree::Event::kSecond:
-          cut.SecondChildStarts(top_record[e.arg]);
-          break;
-        case TopTree::Event::kItem:
-          if (e.arg == item) {
-            ++next_event;
-            return;
-          }
-          break;  // not reached: subtrees are appended in draw order
-      }
-    }
+    top.RecordUntil(item, &retain->top_, retain->root_begin_.data(), retain->root_end_.data());
   };
 
   // Without a reservation (an eps request) the arrays would grow by doubling, ~9 times from
@@ -511,7 +446,6 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
                      part.surface.data() + part.surface.size());
     if (retain) {
       record_top(int(appended));
-      retain->top_.AddPart(uint32_t(appended));
       retain->part_first_triangle_[appended] = uint32_t(first);
     }
     ++appended;

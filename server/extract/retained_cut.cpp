@@ -68,8 +68,7 @@ class Walker {
       : c_(c), cut_(cut), out_(out), observer_(observer), ready_step_(ready_step) {}
 
   // The subtree in records [begin, end) of `part`, whose triangle numbers start at `base`.
-  void Subtree(const extract_internal::CutPart& part, uint32_t base, uint32_t begin,
-               uint32_t end) {
+  void Subtree(const extract_internal::CutPart& part, uint32_t base, uint32_t begin, uint32_t end) {
     struct Range {
       uint32_t begin, end;
     };
@@ -200,8 +199,7 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
   int roots[kNumInitialTets];
   if (c.ordered) {
     const double size = double(1 << c.k);
-    ReferenceTets::Get().InitialOrder(c.orthographic ? c.dir : c.eye / size, c.orthographic,
-                                      roots);
+    ReferenceTets::Get().InitialOrder(c.orthographic ? c.dir : c.eye / size, c.orthographic, roots);
   } else {
     std::iota(roots, roots + kNumInitialTets, 0);
   }
@@ -229,8 +227,7 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
   st.leaves = cut.leaves_;
   st.reordered = true;
   st.total_ms = st.extract_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
-          .count();
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
   return result;
 }
 

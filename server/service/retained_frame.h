@@ -69,8 +69,7 @@ class RetainedFrame {
   // isovalues or eps with every view would pay for nothing), and when the budget has room for
   // a frame of the previous one's size.
   RetainedCut* StartRecording(const ServedVolume& volume, const ExtractRequest& request) {
-    if (budget_ == nullptr || budget_->limit() <= 0 || !last_.Same(volume, request))
-      return nullptr;
+    if (budget_ == nullptr || budget_->limit() <= 0 || !last_.Same(volume, request)) return nullptr;
     // ~56 bytes per triangle measured (vertices, triangles, records); the reserve is settled
     // against what the buffers hold once the frame is in.
     const int64_t estimate = std::max<int64_t>(64 * last_triangles_, 1 << 16);

@@ -51,8 +51,8 @@ struct RowStatsSse2 {
     const __m128 largest = _mm_set1_ps(FLT_MAX);
     for (int half = 0; half < 2; ++half) {
       const __m128 v = _mm_loadu_ps(row + 4 * half);
-      lo[half] = _mm_min_ps(v, lo[half]);  // v < lo ? v : lo
-      hi[half] = _mm_max_ps(v, hi[half]);  // v > hi ? v : hi
+      lo[half] = _mm_min_ps(v, lo[half]);                                     // v < lo ? v : lo
+      hi[half] = _mm_max_ps(v, hi[half]);                                     // v > hi ? v : hi
       bad = _mm_or_ps(bad, _mm_cmpnle_ps(_mm_and_ps(v, abs_mask), largest));  // NaN too
     }
   }

@@ -104,9 +104,9 @@ TEST(RetainedCut, ReorderedForAnotherViewEqualsAFreshExtraction) {
               {Orthographic({0, 0, 1}), DrawOrder::kBackToFront},
               {Perspective({2 * n, 2 * n, 2 * n}), DrawOrder::kNone}};
           for (int i = 0; i < 3; ++i)
-            views.push_back({Perspective({half + n * unit(rng), half + n * unit(rng),
-                                          half + n * unit(rng)}),
-                             DrawOrder::kBackToFront});
+            views.push_back(
+                {Perspective({half + n * unit(rng), half + n * unit(rng), half + n * unit(rng)}),
+                 DrawOrder::kBackToFront});
           for (const auto& [view, order] : views) {
             ExtractRequest fresh_request = r;
             fresh_request.view = view;

@@ -35,7 +35,10 @@ TEST(RowStats, FormsAgreeWithEachOtherAndADirectPass) {
   std::uniform_int_distribution<int> pick(0, 99);
   const float specials[] = {std::numeric_limits<float>::quiet_NaN(),
                             std::numeric_limits<float>::infinity(),
-                            -std::numeric_limits<float>::infinity(), FLT_MAX, -FLT_MAX, -0.0f,
+                            -std::numeric_limits<float>::infinity(),
+                            FLT_MAX,
+                            -FLT_MAX,
+                            -0.0f,
                             std::numeric_limits<float>::denorm_min()};
   int with_bad = 0;
   for (int trial = 0; trial < 500; ++trial) {
@@ -70,7 +73,7 @@ TEST(RowStats, FormsAgreeWithEachOtherAndADirectPass) {
     EXPECT_EQ(std::signbit(sse2.lo), std::signbit(scalar.lo)) << trial;
 #endif
   }
-  EXPECT_GT(with_bad, 50);   // both kinds of trial ran
+  EXPECT_GT(with_bad, 50);  // both kinds of trial ran
   EXPECT_LT(with_bad, 450);
 }
 
