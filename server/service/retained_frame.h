@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <utility>
 #include <vector>
 
@@ -16,7 +17,10 @@
 
 namespace isostream::service {
 
-// Bytes of retained frames the daemon holds, against its limit. Thread-safe.
+class RetainedFrame;
+
+// Bytes of retained frames the daemon holds, against its limit, and the frames holding them.
+// Thread-safe.
 class RetainBudget {
  public:
   explicit RetainBudget(int64_t limit_bytes) : limit_(limit_bytes) {}
@@ -29,28 +33,56 @@ class RetainBudget {
     } while (!used_.compare_exchange_weak(used, used + bytes));
     return true;
   }
+  // Takes `bytes`, freeing other streams' frames, least recently used first, until they fit
+  // (only frames not in use at the moment: their streams are between views).
+  inline bool TakeEvicting(int64_t bytes, const RetainedFrame* taker);
   void Give(int64_t bytes) { used_.fetch_sub(bytes); }
   int64_t used() const { return used_.load(); }
   int64_t limit() const { return limit_; }
 
+  // A clock for "least recently used".
+  uint64_t Tick() { return ++clock_; }
+  void Register(RetainedFrame* frame) {
+    std::lock_guard<std::mutex> lock(mu_);
+    frames_.push_back(frame);
+  }
+  void Unregister(RetainedFrame* frame) {
+    std::lock_guard<std::mutex> lock(mu_);
+    frames_.erase(std::remove(frames_.begin(), frames_.end(), frame), frames_.end());
+  }
+
  private:
   std::atomic<int64_t> used_{0};
   const int64_t limit_;
+  std::atomic<uint64_t> clock_{0};
+  std::mutex mu_;  // guards frames_
+  std::vector<RetainedFrame*> frames_;
 };
 
-// One stream's retained frame. Used by the stream's one running job at a time: no lock. Its
-// buffers, kept or not, are charged to the budget for what they hold (their capacity), from
-// before a frame is recorded into them (an estimate, settled after) until they are freed.
+// One stream's retained frame. Its buffers, kept or not, are charged to the budget for what
+// they hold (their capacity), from before a frame is recorded into them (an estimate, settled
+// after) until they are freed. Its stream's job holds mutex() while it uses the frame (one view
+// at a time); other streams' jobs may free it meanwhile only when that lock is free
+// (RetainBudget::TakeEvicting).
 class RetainedFrame {
  public:
-  explicit RetainedFrame(RetainBudget* budget) : budget_(budget) {}
-  ~RetainedFrame() { Drop(); }
+  explicit RetainedFrame(RetainBudget* budget) : budget_(budget) {
+    if (budget_) budget_->Register(this);
+  }
+  ~RetainedFrame() {
+    if (budget_) budget_->Unregister(this);  // first: no evictor reaches it after
+    Drop();
+  }
   RetainedFrame(const RetainedFrame&) = delete;
   RetainedFrame& operator=(const RetainedFrame&) = delete;
+
+  std::mutex& mutex() { return use_mu_; }
+  uint64_t last_use() const { return last_use_.load(); }
 
   // The retained cut if it draws `request` on `volume` as prepared now, else null. A cut of a
   // volume re-prepared or dropped since is freed.
   const RetainedCut* Find(const ServedVolume& volume, const ExtractRequest& request) {
+    if (budget_) last_use_ = budget_->Tick();
     if (!holds_frame_) return nullptr;
     const HierarchyPtr h = hierarchy_.lock();
     if (h == nullptr || h != volume.prepared.hierarchy) {
@@ -74,7 +106,7 @@ class RetainedFrame {
     // against what the buffers hold once the frame is in.
     const int64_t estimate = std::max<int64_t>(64 * last_triangles_, 1 << 16);
     if (estimate > charged_) {
-      if (!budget_->Take(estimate - charged_)) {
+      if (!budget_->TakeEvicting(estimate - charged_, this)) {
         Drop();  // no room: free what this stream held as well
         return nullptr;
       }
@@ -88,7 +120,7 @@ class RetainedFrame {
   // frame stopped part way, or refused after it ran, is not kept).
   void EndRecording(const ServedVolume& volume, bool whole) {
     const int64_t held = int64_t(cut_.memory_bytes());
-    if (held > charged_ && !budget_->Take(held - charged_)) {
+    if (held > charged_ && !budget_->TakeEvicting(held - charged_, this)) {
       Drop();
       return;
     }
@@ -139,6 +171,8 @@ class RetainedFrame {
   };
 
   RetainBudget* budget_;
+  std::mutex use_mu_;
+  std::atomic<uint64_t> last_use_{0};
   MeshKey last_;  // the mesh of the last refined frame drawn
   int64_t last_triangles_ = 0;
   RetainedCut cut_;
@@ -147,5 +181,24 @@ class RetainedFrame {
   std::weak_ptr<const Hierarchy> hierarchy_;
   int64_t charged_ = 0;  // bytes taken from the budget for cut_'s buffers
 };
+
+inline bool RetainBudget::TakeEvicting(int64_t bytes, const RetainedFrame* taker) {
+  if (Take(bytes)) return true;
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<RetainedFrame*> others;
+  for (RetainedFrame* f : frames_)
+    if (f != taker) others.push_back(f);
+  std::sort(others.begin(), others.end(), [](const RetainedFrame* a, const RetainedFrame* b) {
+    return a->last_use() < b->last_use();
+  });
+  for (RetainedFrame* f : others) {
+    // A frame in use stays (its job holds the lock); never wait here: the taker holds its own.
+    std::unique_lock<std::mutex> in_use(f->mutex(), std::try_to_lock);
+    if (!in_use.owns_lock()) continue;
+    f->Drop();
+    if (Take(bytes)) return true;
+  }
+  return false;
+}
 
 }  // namespace isostream::service

@@ -499,6 +499,9 @@ class ChunkStream : public Reactor, public StreamBase {
     auto volume = core_->catalogue.Get(view.volume());
     if (!volume.ok()) return volume.status();
     if (cancel->load()) return absl::CancelledError("superseded");
+    // The retained frame is this stream's for the view (other streams may free it between
+    // views, when their own frames need the memory).
+    std::lock_guard<std::mutex> using_retained(retained_.mutex());
     return core_->producer.Run(**volume, view, request, generation, cancel, this, received,
                                &coarse_hint_, &retained_);
   }

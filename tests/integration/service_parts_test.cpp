@@ -325,5 +325,55 @@ TEST(RetainedFrame, RecordsKeepsAndFreesWithinTheBudget) {
   EXPECT_EQ(tight.used(), 0);
 }
 
+// When the budget has no room for a stream's frame, the least recently used frames of other
+// streams are freed, unless their streams are using them right now.
+TEST(RetainedFrame, FreesOtherStreamsFramesLeastRecentlyUsedFirst) {
+  CatalogueOptions o;
+  VolumeCatalogue catalogue(o);
+  auto volume = catalogue.Get("buckyball:65");
+  ASSERT_TRUE(volume.ok());
+  const ServedVolume& v = **volume;
+  ExtractRequest r;
+  r.isovalues = {0.05f, 0.15f};
+  r.eps = 0.004;
+  r.view.eye = {3, 2, 1};
+  // Records a frame of r into `frame` (its second view of the mesh); true if it is kept.
+  auto retain = [&](RetainedFrame& frame) {
+    auto first = Extract(*v.prepared.hierarchy, v.prepared.grid_to_world, r);
+    EXPECT_TRUE(first.ok());
+    frame.Drew(v, r, first->stats.triangles);
+    RetainedCut* cut = frame.StartRecording(v, r);
+    if (cut == nullptr) return false;
+    EXPECT_TRUE(Extract(*v.prepared.hierarchy, v.prepared.grid_to_world, r, nullptr, cut).ok());
+    frame.EndRecording(v, true);
+    return frame.Find(v, r) != nullptr;
+  };
+  RetainedFrame probe(nullptr);  // no budget: never records
+  EXPECT_FALSE(retain(probe));
+  // Room for two frames of this mesh, not three.
+  RetainBudget sizing(int64_t{1} << 40);
+  int64_t one = 0;
+  {
+    RetainedFrame frame(&sizing);
+    ASSERT_TRUE(retain(frame));
+    one = sizing.used();
+  }
+  RetainBudget budget(one * 5 / 2);
+  RetainedFrame a(&budget), b(&budget), c(&budget);
+  ASSERT_TRUE(retain(a));
+  ASSERT_TRUE(retain(b));
+  a.Find(v, r);  // a is used again: b is now the least recently used
+  ASSERT_TRUE(retain(c));
+  EXPECT_NE(a.Find(v, r), nullptr);
+  EXPECT_EQ(b.Find(v, r), nullptr);
+  EXPECT_LE(budget.used(), budget.limit());
+  // A frame whose stream is using it is not freed: with a and c in use, b finds no room.
+  std::lock_guard<std::mutex> using_a(a.mutex());
+  std::lock_guard<std::mutex> using_c(c.mutex());
+  EXPECT_FALSE(retain(b));
+  EXPECT_NE(a.Find(v, r), nullptr);
+  EXPECT_NE(c.Find(v, r), nullptr);
+}
+
 }  // namespace
 }  // namespace isostream::service
