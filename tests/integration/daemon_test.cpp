@@ -224,6 +224,34 @@ TEST_F(Daemon, NewViewOfTheSameMeshIsReorderedFromTheLastFrame) {
       << after.retained_bytes();
 }
 
+// A triangle budget names a mesh as well as eps does: from its third view in a session the
+// frame is re-ordered, and it is the frame a direct extraction at the remembered eps draws.
+TEST_F(Daemon, BudgetViewsAreReorderedToo) {
+  constexpr int64_t kBudget = 23456;  // used by no other test of this daemon
+  auto c = Connect();
+  PreparedVolume local = Local("buckyball:65");
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  net::Session& s = **session;
+  const glm::dvec3 eyes[3] = {{2.5, 1.8, 3.1}, {-3.0, 0.5, 1.0}, {0.2, -2.8, -1.5}};
+  for (int i = 0; i < 3; ++i) {
+    SCOPED_TRACE(i);
+    pb::ViewRequest v = MakeView("buckyball:65", 90 + i, 0.0, eyes[i], pb::RAW);
+    v.set_triangle_budget(kBudget);
+    ASSERT_TRUE(s.Send(v).ok());
+    net::Frame frame;
+    ASSERT_TRUE(ReadFrame(s, &frame));
+    EXPECT_EQ(frame.stats.reordered(), i == 2);
+    EXPECT_LE(frame.stats.triangles(), kBudget);
+    auto direct = Extract(*local.hierarchy, local.grid_to_world,
+                          DirectRequest(frame.stats.eps_used(), eyes[i]));
+    ASSERT_TRUE(direct.ok());
+    ExpectSameFrame(direct->mesh, frame.mesh, 0.0f);
+  }
+  ASSERT_TRUE(s.CloseSend().ok());
+  EXPECT_TRUE(s.Finish().ok());
+}
+
 TEST_F(Daemon, FetchCommandWritesTheFrame) {
   const std::string out = scratch_->path() + "/fetched.ply";
   const std::string cmd = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
