@@ -2,8 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstring>
-#include <functional>
 #include <glm/geometric.hpp>
 #include <numeric>
 #include <string>
