@@ -78,6 +78,7 @@ class RetainedFrame {
 
   std::mutex& mutex() { return use_mu_; }
   uint64_t last_use() const { return last_use_.load(); }
+  int64_t charged() const { return charged_; }  // with mutex() held, or by its own job
 
   // The retained cut if it draws `request` on `volume` as prepared now, else null. A cut of a
   // volume re-prepared or dropped since is freed.
@@ -184,21 +185,31 @@ class RetainedFrame {
 
 inline bool RetainBudget::TakeEvicting(int64_t bytes, const RetainedFrame* taker) {
   if (Take(bytes)) return true;
+  if (bytes > limit_) return false;
   std::lock_guard<std::mutex> lock(mu_);
-  std::vector<RetainedFrame*> others;
+  // Least recently used first, by stamps read once: other streams' jobs move theirs meanwhile,
+  // and sorting on values that change under it is undefined behaviour.
+  std::vector<std::pair<uint64_t, RetainedFrame*>> others;
   for (RetainedFrame* f : frames_)
-    if (f != taker) others.push_back(f);
-  std::sort(others.begin(), others.end(), [](const RetainedFrame* a, const RetainedFrame* b) {
-    return a->last_use() < b->last_use();
-  });
-  for (RetainedFrame* f : others) {
-    // A frame in use stays (its job holds the lock); never wait here: the taker holds its own.
+    if (f != taker) others.push_back({f->last_use(), f});
+  std::sort(others.begin(), others.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  // Frames in use stay (their jobs hold the lock; never wait here: the taker holds its own).
+  // Frames are freed only if enough can be freed: otherwise idle streams would lose theirs
+  // for nothing.
+  std::vector<std::pair<RetainedFrame*, std::unique_lock<std::mutex>>> victims;
+  int64_t freeable = limit_ - used();
+  for (const auto& entry : others) {
+    if (freeable >= bytes) break;
+    RetainedFrame* f = entry.second;
     std::unique_lock<std::mutex> in_use(f->mutex(), std::try_to_lock);
-    if (!in_use.owns_lock()) continue;
-    f->Drop();
-    if (Take(bytes)) return true;
+    if (!in_use.owns_lock() || f->charged() == 0) continue;
+    freeable += f->charged();
+    victims.push_back({f, std::move(in_use)});
   }
-  return false;
+  if (freeable < bytes) return false;  // the locks are released, nothing freed
+  for (auto& victim : victims) victim.first->Drop();
+  return Take(bytes);
 }
 
 }  // namespace isostream::service

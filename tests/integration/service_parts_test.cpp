@@ -367,6 +367,12 @@ TEST(RetainedFrame, FreesOtherStreamsFramesLeastRecentlyUsedFirst) {
   EXPECT_NE(a.Find(v, r), nullptr);
   EXPECT_EQ(b.Find(v, r), nullptr);
   EXPECT_LE(budget.used(), budget.limit());
+  // A frame no eviction could make room for frees nothing.
+  RetainedFrame huge(&budget);
+  huge.Drew(v, r, int64_t{1} << 32);  // its next frame is estimated past the whole budget
+  EXPECT_EQ(huge.StartRecording(v, r), nullptr);
+  EXPECT_NE(a.Find(v, r), nullptr);
+  EXPECT_NE(c.Find(v, r), nullptr);
   // A frame whose stream is using it is not freed: with a and c in use, b finds no room.
   std::lock_guard<std::mutex> using_a(a.mutex());
   std::lock_guard<std::mutex> using_c(c.mutex());
