@@ -22,7 +22,8 @@ namespace isostream::extract_internal {
 
 struct CutRecord {
   enum Kind : uint8_t { kRefine, kLeaf, kMultiLeaf, kComponent, kPart };
-  // kRefine: the refinement vertex. kLeaf, kComponent: the first triangle (of the part).
+  // kRefine: the plane side of the refinement vertex (PlaneSide, as int64_t). kLeaf,
+  // kComponent: the first triangle (of the part).
   // kMultiLeaf: index into CutPart::multi. kPart: the part (a subtree of the split).
   uint64_t a;
   // kRefine: the record where the second-drawn child's subtree starts (the first's starts
@@ -54,9 +55,10 @@ struct CutPart {
   }
 
   // Returns the record's index, for SecondChildStarts.
-  uint32_t AddRefine(PackedPoint x, TetClass cls, bool child0_drawn_first) {
+  uint32_t AddRefine(int64_t plane_side, TetClass cls, bool child0_drawn_first) {
     const uint32_t i = uint32_t(records.size());
-    *records.Extend(1) = {x, 0, CutRecord::kRefine, cls.value, child0_drawn_first};
+    *records.Extend(1) = {uint64_t(plane_side), 0, CutRecord::kRefine, cls.value,
+                          child0_drawn_first};
     return i;
   }
   // The second-drawn child of refine record i starts here. A node whose first child left no
@@ -89,7 +91,7 @@ struct CutPart {
 // joined: preorder events, with a kPart record where each subtree goes.
 struct SplitTree {
   struct Entry {
-    PackedPoint x = 0;  // refinement vertex, once refined
+    int64_t plane_side = 0;  // of the refinement vertex (PlaneSide), once refined
     TetClass cls;
     bool child0_first = false;
     int kids[2] = {-1, -1};  // in draw order, once refined
@@ -128,7 +130,7 @@ struct SplitTree {
           break;
         case Event::kRefine: {
           const Entry& n = entries[size_t(e.arg)];
-          record_of_[size_t(e.arg)] = top->AddRefine(n.x, n.cls, n.child0_first);
+          record_of_[size_t(e.arg)] = top->AddRefine(n.plane_side, n.cls, n.child0_first);
           break;
         }
         case Event::kSecond:

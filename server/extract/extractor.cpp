@@ -180,7 +180,7 @@ std::vector<Node> SplitIntoSubtrees(const Context& c,
         const int e = ids[j], kid = int(top->entries.size());
         top->entries.resize(kid + 2);
         extract_internal::SplitTree::Entry& n = top->entries[e];
-        n.x = (t.v[0] + t.v[3]) >> 1;
+        n.plane_side = extract_internal::PlaneSide(c, t.cls, (t.v[0] + t.v[3]) >> 1);
         n.cls = t.cls;
         n.child0_first = t.child0_first;
         n.kids[0] = kid, n.kids[1] = kid + 1;

@@ -10,7 +10,6 @@
 
 namespace isostream {
 
-using extract_internal::ChildZeroFirst;
 using extract_internal::Context;
 using extract_internal::CutRecord;
 using extract_internal::MultiLeaf;
@@ -81,7 +80,8 @@ class Walker {
         if (r.kind == CutRecord::kRefine) {
           const Range first{cur.begin + 1, r.b}, second{r.b, cur.end};
           // The test the traversal makes, so the order is a fresh extraction's.
-          const bool swap = ChildZeroFirst(c_, TetClass{r.c}, r.a) != r.child0_drawn_first;
+          const bool swap = extract_internal::ChildZeroFirstAtSide(
+                                c_, TetClass{r.c}, int64_t(r.a)) != r.child0_drawn_first;
           stack[top++] = swap ? first : second;
           cur = swap ? second : first;
           continue;

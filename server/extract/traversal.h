@@ -69,8 +69,9 @@ class Traverser {
           }
           Bisect(c_, *cur, spare, &stack[top++]);
           if constexpr (kRecord)
-            second_of[top - 1] =
-                cut_->AddRefine((cur->v[0] + cur->v[3]) >> 1, cur->cls, cur->child0_first);
+            second_of[top - 1] = cut_->AddRefine(
+                PlaneSide(c_, cur->cls, (cur->v[0] + cur->v[3]) >> 1), cur->cls,
+                cur->child0_first);
           if (!kEmit && curve_) {
             // A leaf at the eta codes above its own, up to its nearest ancestor's.
             const uint32_t code = EtaCode(c_, *cur);
@@ -187,7 +188,8 @@ class Traverser {
       const unsigned far = 2 * at + ((fr.child1_first >> at) & 1);
       uint32_t record = 0;
       if constexpr (kRecord)
-        record = cut_->AddRefine(fr.p[b.refinement], b.cls, !((fr.child1_first >> at) & 1));
+        record = cut_->AddRefine(PlaneSide(c_, b.cls, fr.p[b.refinement]), b.cls,
+                                 !((fr.child1_first >> at) & 1));
       const int64_t n = BlockVisit<kDepth + 1>(fr, far, visited);
       if constexpr (kRecord) cut_->SecondChildStarts(record);
       return n + BlockVisit<kDepth + 1>(fr, far ^ 1, visited);

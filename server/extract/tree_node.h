@@ -157,13 +157,25 @@ inline int64_t FieldSum(PackedPoint p, uint64_t multiplier) {
   return int64_t(((p * multiplier) >> (2 * kFieldBits)) & 0xffff);
 }
 
+// normal . x for the integer normal of class cls's separating plane: what the perspective
+// plane test compares with the eye's side. It depends on the point and the class, not on the
+// view, so a retained cut keeps it instead of the point.
+inline int64_t PlaneSide(const Context& c, TetClass cls, PackedPoint x) {
+  return FieldSum(x, c.plane_plus[cls.value]) - FieldSum(x, c.plane_minus[cls.value]);
+}
+
 // Whether child 0 of a tetrahedron of class cls with refinement vertex x is drawn first:
 // unless the eye is on its side of the separating plane.
 inline bool ChildZeroFirst(const Context& c, TetClass cls, PackedPoint x) {
   if (!c.ordered) return true;
   if (c.orthographic) return c.ortho_child0_first[cls.value];
-  const int64_t nx = FieldSum(x, c.plane_plus[cls.value]) - FieldSum(x, c.plane_minus[cls.value]);
-  return nx >= c.plane_at_least[cls.value];
+  return PlaneSide(c, cls, x) >= c.plane_at_least[cls.value];
+}
+// The same test given the plane side.
+inline bool ChildZeroFirstAtSide(const Context& c, TetClass cls, int64_t side) {
+  if (!c.ordered) return true;
+  if (c.orthographic) return c.ortho_child0_first[cls.value];
+  return side >= c.plane_at_least[cls.value];
 }
 
 // §5: the wavelet at the refinement vertex of a tetrahedron at `level` (value fx there, f0 and
