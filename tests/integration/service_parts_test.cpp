@@ -256,27 +256,38 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
 // A stream's retained frame: recorded on the second refined frame of a mesh, charged to the
 // daemon's budget for what it holds, freed when the stream draws another mesh or the budget
 // has no room, and never kept from a frame that did not finish.
-TEST(RetainedFrame, RecordsKeepsAndFreesWithinTheBudget) {
-  CatalogueOptions o;
-  VolumeCatalogue catalogue(o);
-  auto volume = catalogue.Get("buckyball:65");
-  ASSERT_TRUE(volume.ok());
-  const ServedVolume& v = **volume;
-  ExtractRequest r;
-  r.isovalues = {0.05f, 0.15f};
-  r.eps = 0.004;
-  r.view.eye = {3, 2, 1};
-  auto extract = [&](RetainedCut* cut) {
-    auto res = Extract(*v.prepared.hierarchy, v.prepared.grid_to_world, r, nullptr, cut);
+// buckyball:65 served as the daemon serves it, and one request for two of its shells.
+class RetainedFrameTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto volume = catalogue_.Get("buckyball:65");
+    ASSERT_TRUE(volume.ok()) << volume.status();
+    volume_ = *volume;
+    r.isovalues = {0.05f, 0.15f};
+    r.eps = 0.004;
+    r.view.eye = {3, 2, 1};
+  }
+  // Extracts r, recording into `cut` if given; returns the triangle count.
+  int64_t extract(RetainedCut* cut = nullptr) {
+    auto res = Extract(*v().prepared.hierarchy, v().prepared.grid_to_world, r, nullptr, cut);
     EXPECT_TRUE(res.ok());
     return res.ok() ? res->stats.triangles : 0;
-  };
+  }
+  const ServedVolume& v() const { return *volume_; }
+
+  VolumeCatalogue catalogue_{CatalogueOptions{}};
+  ServedVolumePtr volume_;
+  ExtractRequest r;
+};
+
+TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
+  const ServedVolume& v = this->v();
 
   RetainBudget budget(int64_t{256} << 20);
   {
     RetainedFrame frame(&budget);
     EXPECT_EQ(frame.StartRecording(v, r), nullptr);  // the first frame of a mesh
-    frame.Drew(v, r, extract(nullptr));
+    frame.Drew(v, r, extract());
     RetainedCut* cut = frame.StartRecording(v, r);  // the second
     ASSERT_NE(cut, nullptr);
     const int64_t triangles = extract(cut);
@@ -327,24 +338,14 @@ TEST(RetainedFrame, RecordsKeepsAndFreesWithinTheBudget) {
 
 // When the budget has no room for a stream's frame, the least recently used frames of other
 // streams are freed, unless their streams are using them right now.
-TEST(RetainedFrame, FreesOtherStreamsFramesLeastRecentlyUsedFirst) {
-  CatalogueOptions o;
-  VolumeCatalogue catalogue(o);
-  auto volume = catalogue.Get("buckyball:65");
-  ASSERT_TRUE(volume.ok());
-  const ServedVolume& v = **volume;
-  ExtractRequest r;
-  r.isovalues = {0.05f, 0.15f};
-  r.eps = 0.004;
-  r.view.eye = {3, 2, 1};
+TEST_F(RetainedFrameTest, FreesOtherStreamsFramesLeastRecentlyUsedFirst) {
+  const ServedVolume& v = this->v();
   // Records a frame of r into `frame` (its second view of the mesh); true if it is kept.
   auto retain = [&](RetainedFrame& frame) {
-    auto first = Extract(*v.prepared.hierarchy, v.prepared.grid_to_world, r);
-    EXPECT_TRUE(first.ok());
-    frame.Drew(v, r, first->stats.triangles);
+    frame.Drew(v, r, extract());
     RetainedCut* cut = frame.StartRecording(v, r);
     if (cut == nullptr) return false;
-    EXPECT_TRUE(Extract(*v.prepared.hierarchy, v.prepared.grid_to_world, r, nullptr, cut).ok());
+    extract(cut);
     frame.EndRecording(v, true);
     return frame.Find(v, r) != nullptr;
   };
