@@ -6,7 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <functional>
 #include <memory>
 #include <string>
@@ -14,6 +16,7 @@
 #include <vector>
 
 #include "client/net/session_client.h"
+#include "server/extract/extractor.h"
 #include "server/hierarchy/prepared_volume.h"
 #include "tests/integration/daemon_process.h"
 
@@ -36,6 +39,50 @@ inline pb::ViewRequest MakeView(const std::string& volume, uint64_t id, double e
   v.mutable_camera()->mutable_eye()->set_z(eye.z);
   v.set_codec(codec);
   return v;
+}
+
+// The extraction a test compares a served frame with: the test views' isovalues at eps.
+inline ExtractRequest DirectRequest(double eps, glm::dvec3 eye) {
+  ExtractRequest r;
+  r.isovalues = kIso;
+  r.eps = eps;
+  r.view.eye = eye;
+  return r;
+}
+
+// Per-triangle comparison: the codec renumbers (and may duplicate) vertices, so triangles are
+// compared corner by corner, in order, with their surface index.
+inline void ExpectSameFrame(const OrderedMesh& direct, const OrderedMesh& got, float position_error) {
+  ASSERT_EQ(direct.triangle_count(), got.triangle_count());
+  size_t surface_mismatch = 0, position_mismatch = 0;
+  float worst = 0;
+  for (size_t t = 0; t < direct.triangle_count(); ++t) {
+    surface_mismatch += direct.surface[t] != got.surface[t];
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t a = direct.triangles[3 * t + c], b = got.triangles[3 * t + c];
+      for (int k = 0; k < 3; ++k) {
+        const float d = std::abs(direct.positions[3 * a + k] - got.positions[3 * b + k]);
+        worst = std::max(worst, d);
+        position_mismatch += d > position_error;
+      }
+    }
+  }
+  EXPECT_EQ(surface_mismatch, 0u);
+  EXPECT_EQ(position_mismatch, 0u) << "worst " << worst << " allowed " << position_error;
+}
+
+// Reads chunks until a frame is complete; false if the stream ends first.
+inline bool ReadFrame(net::Session& s, net::Frame* out) {
+  net::FrameAssembler assembler;
+  pb::FrameChunk chunk;
+  while (s.Read(&chunk)) {
+    if (!assembler.Add(chunk).ok()) return false;
+    if (assembler.complete()) {
+      *out = assembler.Take();
+      return true;
+    }
+  }
+  return false;
 }
 
 // The default daemon (small limits so the limit tests stay quick), shared by a suite.

@@ -393,6 +393,62 @@ TEST_F(OneSlotDaemon, ACancelledJobHoldsItsSlotUntilItEnds) {
   if (refused == 0) GTEST_SKIP() << "the preparation ended before the first call";
 }
 
+// Sessions orbiting meshes of their own at once: frames are recorded and re-ordered on several
+// streams concurrently (eviction between streams is RetainedFrameTest's), every frame is still
+// the one a direct extraction draws, and nothing stays retained after.
+class CrowdedDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    scratch_ = new ScratchDir();
+    daemon_ = new DaemonProcess();
+    ASSERT_TRUE(daemon_->Start({"--cache-dir", scratch_->path() + "/cache", "--retain-mb", "64",
+                                "--threads", "2"},
+                               scratch_->path() + "/isostreamd.log"));
+  }
+};
+
+TEST_F(CrowdedDaemon, ConcurrentOrbitsStayExact) {
+  PreparedVolume local = Local("buckyball:65");
+  net::ClientOptions o;
+  o.address = daemon_->address();
+  constexpr int kSessions = 3, kViews = 6;
+  std::atomic<int> reordered{0}, compared{0};
+  std::vector<std::thread> sessions;
+  for (int t = 0; t < kSessions; ++t) {
+    sessions.emplace_back([&, t] {
+      auto c = net::Client::Connect(o);
+      ASSERT_TRUE(c.ok());
+      auto session = (*c)->OpenSession();
+      ASSERT_TRUE(session.ok());
+      const double eps = 0.003 + 0.001 * t;  // a mesh of its own, ~9 MB retained
+      for (int i = 0; i < kViews; ++i) {
+        const double a = 0.9 * i + t;
+        const glm::dvec3 eye(3 * std::cos(a), 1.5 - 0.5 * t, 3 * std::sin(a));
+        ASSERT_TRUE((*session)->Send(MakeView("buckyball:65", 1 + i, eps, eye, pb::RAW)).ok());
+        net::Frame frame;
+        ASSERT_TRUE(ReadFrame(**session, &frame));
+        reordered += frame.stats.reordered();
+        auto direct = Extract(*local.hierarchy, local.grid_to_world, DirectRequest(eps, eye));
+        ASSERT_TRUE(direct.ok());
+        ExpectSameFrame(direct->mesh, frame.mesh, 0.0f);
+        ++compared;
+      }
+      ASSERT_TRUE((*session)->CloseSend().ok());
+      EXPECT_TRUE((*session)->Finish().ok());
+    });
+  }
+  for (std::thread& s : sessions) s.join();
+  EXPECT_EQ(compared.load(), kSessions * kViews);
+  EXPECT_GT(reordered.load(), 0);
+  auto c = Connect();
+  pb::ServerStats stats;
+  EXPECT_TRUE(WaitForStats(
+      c.get(),
+      [](const pb::ServerStats& s) { return s.sessions_open() == 0 && s.retained_bytes() == 0; },
+      &stats));
+  EXPECT_EQ(stats.frames_reordered(), reordered.load());
+}
+
 class TlsDaemon : public Daemon {};
 
 TEST_F(TlsDaemon, ServesOverTls) {

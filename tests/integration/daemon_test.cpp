@@ -16,39 +16,10 @@
 #include "shared/ply_io.h"
 #include "tests/integration/daemon_fixture.h"
 
-// In the fixture's namespace: Daemon, MakeView, kIso, pb and the process helpers need no
-// using-declarations.
+// In the fixture's namespace: Daemon, MakeView, kIso, pb, the frame helpers and the process
+// helpers need no using-declarations.
 namespace isostream::testing {
 namespace {
-
-ExtractRequest DirectRequest(double eps, glm::dvec3 eye) {
-  ExtractRequest r;
-  r.isovalues = kIso;
-  r.eps = eps;
-  r.view.eye = eye;
-  return r;
-}
-
-// Per-triangle comparison: the codec renumbers (and may duplicate) vertices, so triangles are
-// compared corner by corner, in order, with their surface index.
-void ExpectSameFrame(const OrderedMesh& direct, const OrderedMesh& got, float position_error) {
-  ASSERT_EQ(direct.triangle_count(), got.triangle_count());
-  size_t surface_mismatch = 0, position_mismatch = 0;
-  float worst = 0;
-  for (size_t t = 0; t < direct.triangle_count(); ++t) {
-    surface_mismatch += direct.surface[t] != got.surface[t];
-    for (int c = 0; c < 3; ++c) {
-      const uint32_t a = direct.triangles[3 * t + c], b = got.triangles[3 * t + c];
-      for (int k = 0; k < 3; ++k) {
-        const float d = std::abs(direct.positions[3 * a + k] - got.positions[3 * b + k]);
-        worst = std::max(worst, d);
-        position_mismatch += d > position_error;
-      }
-    }
-  }
-  EXPECT_EQ(surface_mismatch, 0u);
-  EXPECT_EQ(position_mismatch, 0u) << "worst " << worst << " allowed " << position_error;
-}
 
 TEST_F(Daemon, HealthServingAndCatalogue) {
   auto c = Connect();
@@ -159,19 +130,6 @@ TEST_F(Daemon, BudgetSearchRunsOnceAndLaterViewsReuseItsEps) {
   }
 }
 
-// Reads chunks until a frame is complete; false if the stream ends first.
-bool ReadFrame(net::Session& s, net::Frame* out) {
-  net::FrameAssembler assembler;
-  pb::FrameChunk chunk;
-  while (s.Read(&chunk)) {
-    if (!assembler.Add(chunk).ok()) return false;
-    if (assembler.complete()) {
-      *out = assembler.Take();
-      return true;
-    }
-  }
-  return false;
-}
 
 // Within a session, once two refined frames in a row drew the same mesh (same volume,
 // isovalues, eps, normals), the second is kept and later views of that mesh are re-ordered
