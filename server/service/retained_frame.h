@@ -40,6 +40,21 @@ class RetainBudget {
   int64_t used() const { return used_.load(); }
   int64_t limit() const { return limit_; }
 
+  // What a frame of `triangles` is expected to hold: the most bytes per triangle a frame has
+  // held so far (its buffers' capacity; ~64 before any), so that streams reserve up front what
+  // they will need instead of all growing past their reserves at once and dropping their
+  // frames for want of room.
+  int64_t Estimate(int64_t triangles) const {
+    return std::max<int64_t>(bytes_per_triangle_.load() * triangles, int64_t{1} << 16);
+  }
+  void Held(int64_t bytes, int64_t triangles) {
+    if (triangles <= 0) return;
+    const int64_t ratio = (bytes + triangles - 1) / triangles;
+    int64_t seen = bytes_per_triangle_.load();
+    while (ratio > seen && !bytes_per_triangle_.compare_exchange_weak(seen, ratio)) {
+    }
+  }
+
   // A clock for "least recently used".
   uint64_t Tick() { return ++clock_; }
   void Register(RetainedFrame* frame) {
@@ -55,6 +70,7 @@ class RetainBudget {
   std::atomic<int64_t> used_{0};
   const int64_t limit_;
   std::atomic<uint64_t> clock_{0};
+  std::atomic<int64_t> bytes_per_triangle_{64};
   std::mutex mu_;  // guards frames_
   std::vector<RetainedFrame*> frames_;
 };
@@ -103,9 +119,8 @@ class RetainedFrame {
   // a frame of the previous one's size.
   RetainedCut* StartRecording(const ServedVolume& volume, const ExtractRequest& request) {
     if (budget_ == nullptr || budget_->limit() <= 0 || !last_.Same(volume, request)) return nullptr;
-    // ~56 bytes per triangle measured (vertices, triangles, records); the reserve is settled
-    // against what the buffers hold once the frame is in.
-    const int64_t estimate = std::max<int64_t>(64 * last_triangles_, 1 << 16);
+    // The reserve is settled against what the buffers hold once the frame is in.
+    const int64_t estimate = budget_->Estimate(last_triangles_);
     if (estimate > charged_) {
       if (!budget_->TakeEvicting(estimate - charged_, this)) {
         Drop();  // no room: free what this stream held as well
@@ -121,6 +136,7 @@ class RetainedFrame {
   // frame stopped part way, or refused after it ran, is not kept).
   void EndRecording(const ServedVolume& volume, bool whole) {
     const int64_t held = int64_t(cut_.memory_bytes());
+    if (whole) budget_->Held(held, int64_t(cut_.triangle_count()));
     if (held > charged_ && !budget_->TakeEvicting(held - charged_, this)) {
       Drop();
       return;

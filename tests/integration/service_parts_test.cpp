@@ -296,6 +296,8 @@ TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
     ASSERT_NE(frame.Find(v, r), nullptr);
     EXPECT_EQ(budget.used(), int64_t(frame.Find(v, r)->memory_bytes()));
     EXPECT_GT(budget.used(), 32 * triangles);
+    // The next frame of this size is estimated at what this one held, not less.
+    EXPECT_GE(budget.Estimate(triangles), budget.used());
 
     // A frame that did not finish is not kept, and what was held stays charged until freed.
     ASSERT_NE(frame.StartRecording(v, r), nullptr);
