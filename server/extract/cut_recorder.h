@@ -86,9 +86,9 @@ struct CutPart {
   void AddPart(uint32_t part) { *records.Extend(1) = {part, 0, CutRecord::kPart, 0, false}; }
 };
 
-// The refinements the split into parallel subtrees makes above them (extractor.cpp), recorded
-// while it runs and replayed, in its draw order, around the subtrees' own records as they are
-// joined: preorder events, with a kPart record where each subtree goes.
+// The refinements the split into parallel subtrees makes above them (extractor.cpp), noted
+// while it runs and recorded once the frame is whole, in its draw order, with a kPart record
+// where each subtree goes (the subtrees record into parts of their own).
 struct SplitTree {
   struct Entry {
     int64_t plane_side = 0;  // of the refinement vertex (PlaneSide), once refined
@@ -97,71 +97,31 @@ struct SplitTree {
     int kids[2] = {-1, -1};  // in draw order, once refined
     int item = -1;           // the subtree it became
   };
-  struct Event {
-    enum Kind : uint8_t { kRootBegin, kRootEnd, kRefine, kSecond, kItem };
-    Kind kind;
-    int arg;  // kRoot*: initial tetrahedron; kRefine, kSecond: entry; kItem: subtree
-  };
   std::vector<Entry> entries;
   std::vector<std::pair<int, int>> roots;  // (initial tetrahedron, entry) in draw order
-  std::vector<Event> events;               // Walk's
 
-  void Walk() {
+  // Records the tree into `top`; the records of initial tetrahedron i go to
+  // [root_begin[i], root_end[i]).
+  void Record(CutPart* top, uint32_t* root_begin, uint32_t* root_end) const {
     for (const auto& [initial, entry] : roots) {
-      events.push_back({Event::kRootBegin, initial});
-      Visit(entry);
-      events.push_back({Event::kRootEnd, initial});
-    }
-    record_of_.assign(entries.size(), 0);
-  }
-
-  // Records the events up to subtree `item` (all that are left for -1) into `top`, then the
-  // kPart record of `item`; the record range of initial tetrahedron i goes to
-  // [root_begin[i], root_end[i]). Subtrees must come in draw order.
-  void RecordUntil(int item, CutPart* top, uint32_t* root_begin, uint32_t* root_end) {
-    for (; next_ < events.size(); ++next_) {
-      const Event& e = events[next_];
-      switch (e.kind) {
-        case Event::kRootBegin:
-          root_begin[e.arg] = uint32_t(top->records.size());
-          break;
-        case Event::kRootEnd:
-          root_end[e.arg] = uint32_t(top->records.size());
-          break;
-        case Event::kRefine: {
-          const Entry& n = entries[size_t(e.arg)];
-          record_of_[size_t(e.arg)] = top->AddRefine(n.plane_side, n.cls, n.child0_first);
-          break;
-        }
-        case Event::kSecond:
-          top->SecondChildStarts(record_of_[size_t(e.arg)]);
-          break;
-        case Event::kItem:
-          if (e.arg == item) {
-            ++next_;
-            top->AddPart(uint32_t(item));
-            return;
-          }
-          break;  // not reached: subtrees come in draw order
-      }
+      root_begin[initial] = uint32_t(top->records.size());
+      Record(entry, top);
+      root_end[initial] = uint32_t(top->records.size());
     }
   }
 
  private:
-  void Visit(int e) {
+  void Record(int e, CutPart* top) const {
     const Entry& n = entries[size_t(e)];
     if (n.kids[0] >= 0) {
-      events.push_back({Event::kRefine, e});
-      Visit(n.kids[0]);
-      events.push_back({Event::kSecond, e});
-      Visit(n.kids[1]);
+      const uint32_t record = top->AddRefine(n.plane_side, n.cls, n.child0_first);
+      Record(n.kids[0], top);
+      top->SecondChildStarts(record);
+      Record(n.kids[1], top);
     } else if (n.item >= 0) {
-      events.push_back({Event::kItem, n.item});
+      top->AddPart(uint32_t(n.item));
     }
   }
-
-  std::vector<uint32_t> record_of_;  // entry -> its refine record in `top`
-  size_t next_ = 0;                  // the next event to record
 };
 
 }  // namespace isostream::extract_internal

@@ -200,10 +200,8 @@ std::vector<Node> SplitIntoSubtrees(const Context& c,
     ids.swap(next_ids);
     if (!refined) break;
   }
-  if (top) {
+  if (top)
     for (size_t i = 0; i < items.size(); ++i) top->entries[ids[i]].item = int(i);
-    top->Walk();
-  }
   return items;
 }
 
@@ -386,12 +384,6 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     for (extract_internal::CutPart& part : retain->parts_) part.clear();
     retain->part_first_triangle_.assign(items.size(), 0);
   }
-  // Retaining: the split's records up to subtree `item` (to the end for -1), with a kPart
-  // record for the subtree's own.
-  auto record_top = [&](int item) {
-    top.RecordUntil(item, &retain->top_, retain->root_begin_.data(), retain->root_end_.data());
-  };
-
   // Without a reservation (an eps request) the arrays would grow by doubling, ~9 times from
   // the first part to a 1 M-triangle frame, copying about the frame once more. Once a 16th of
   // the parts is in (parts vary ~10x in size: fewer project badly), they grow instead to what
@@ -444,10 +436,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       *it = to_global[*it];
     m.surface.insert(m.surface.end(), part.surface.data(),
                      part.surface.data() + part.surface.size());
-    if (retain) {
-      record_top(int(appended));
-      retain->part_first_triangle_[appended] = uint32_t(first);
-    }
+    if (retain) retain->part_first_triangle_[appended] = uint32_t(first);
     ++appended;
     st.tets_visited += part.visited;
     st.leaves += part.leaves;
@@ -500,8 +489,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   st.vertices = int64_t(m.vertex_count());
   for (uint8_t s : m.surface) ++st.triangles_per_surface[s];
   if (retain) {
-    record_top(-1);
     RetainedCut& cut = *retain;
+    top.Record(&cut.top_, cut.root_begin_.data(), cut.root_end_.data());
     cut.isovalues_ = r.isovalues;
     cut.eps_ = eps;
     cut.budget_ = r.budget;
