@@ -96,32 +96,23 @@ class LeafEmitter {
       cut_->AddLeaf(uint32_t(before), uint32_t(out_->surface.size() - before));
       return n;
     }
-    int order[kMaxSurfaces], count = 0;
-    if (!c_.ordered) {
-      for (int i = first; i < last; ++i) order[count++] = i;
-    } else if (c_.orthographic) {
-      const bool descending = glm::dot(LeafGradient(t), c_.dir) > 0;  // f grows away from the eye
-      for (int i = first; i < last; ++i) order[count++] = descending ? last - 1 - (i - first) : i;
-    } else {
-      // Isovalues above f_T(eye), highest first; then those at or below it, lowest first.
-      const double fe = FieldAtEye(c_, LeafGradient(t), t.f[0], t.v[0]);
-      int split = first;
-      while (split < last && c_.iso[split] <= fe) ++split;
-      for (int i = last - 1; i >= split; --i) order[count++] = i;
-      for (int i = first; i < split; ++i) order[count++] = i;
-    }
+    const int count = last - first;
+    int order[kMaxSurfaces];  // of the isovalues from `first`
+    ComponentOrder(
+        c_, [&] { return LeafGradient(t); }, t.f[0], t.v[0],
+        [&](int i) { return c_.iso[first + i]; }, count, order);
     int triangles = 0;
     if constexpr (!kEmit || !kRecord) {
-      for (int j = 0; j < count; ++j) triangles += Component(t, order[j]);
+      for (int j = 0; j < count; ++j) triangles += Component(t, first + order[j]);
       return triangles;
     }
-    // Recorded with what orders the components for another view (the same expressions as
-    // above, so it decides as a fresh extraction would), components by ascending isovalue.
+    // Recorded with what orders the components for another view (ComponentOrder reads the
+    // same), components by ascending isovalue.
     size_t start[kMaxSurfaces], end[kMaxSurfaces];
     for (int j = 0; j < count; ++j) {
-      start[order[j] - first] = out_->surface.size();
-      triangles += Component(t, order[j]);
-      end[order[j] - first] = out_->surface.size();
+      start[order[j]] = out_->surface.size();
+      triangles += Component(t, first + order[j]);
+      end[order[j]] = out_->surface.size();
     }
     uint32_t nonempty = 0;
     for (int i = 0; i < count; ++i) nonempty += end[i] > start[i];

@@ -143,19 +143,11 @@ class Walker {
     const MultiLeaf& leaf = part.multi[leaf_record.a];
     const CutRecord* comp = &leaf_record + 1;
     const int count = int(leaf_record.b);
-    auto draw = [&](int i) { Triangles(base + uint32_t(comp[i].a), comp[i].b); };
-    if (!c_.ordered) {
-      for (int i = 0; i < count; ++i) draw(i);
-    } else if (c_.orthographic) {
-      const bool descending = glm::dot(leaf.g, c_.dir) > 0;
-      for (int i = 0; i < count; ++i) draw(descending ? count - 1 - i : i);
-    } else {
-      const double fe = extract_internal::FieldAtEye(c_, leaf.g, leaf.f0, leaf.v0);
-      int split = 0;
-      while (split < count && c_.iso[comp[split].c] <= fe) ++split;
-      for (int i = count - 1; i >= split; --i) draw(i);
-      for (int i = 0; i < split; ++i) draw(i);
-    }
+    int order[kMaxSurfaces];
+    extract_internal::ComponentOrder(
+        c_, [&] { return leaf.g; }, leaf.f0, leaf.v0, [&](int i) { return c_.iso[comp[i].c]; },
+        count, order);
+    for (int j = 0; j < count; ++j) Triangles(base + uint32_t(comp[order[j]].a), comp[order[j]].b);
   }
 
   const Context& c_;

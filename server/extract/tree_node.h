@@ -186,10 +186,27 @@ inline double Wavelet(const Context& c, float fx, float f0, float f3, int level)
   return (double(fx) - 0.5 * (double(f0) + double(f3))) * c.inv_unit[level];
 }
 
-// The leaf's linear field at the eye, which orders its components under perspective (§4.3):
-// one expression for the traversal and for re-ordering a retained cut, so both decide alike.
-inline double FieldAtEye(const Context& c, const glm::dvec3& g, float f0, PackedPoint v0) {
-  return f0 + glm::dot(g, c.eye - glm::dvec3(Unpack(v0)));
+// The draw order of a leaf's `count` components, far to near (§4.3), into order[] as indices
+// 0..count-1 of their isovalues iso(0) < ... < iso(count - 1). gradient() is the leaf's (§5),
+// read only when the order needs it; f0 and v0 are one corner's value and point. One function
+// for the traversal and for re-ordering a retained cut, so both decide alike.
+template <typename Gradient, typename Iso>
+inline void ComponentOrder(const Context& c, Gradient gradient, float f0, PackedPoint v0, Iso iso,
+                           int count, int* order) {
+  int n = 0;
+  if (!c.ordered) {
+    for (int i = 0; i < count; ++i) order[n++] = i;
+  } else if (c.orthographic) {
+    const bool descending = glm::dot(gradient(), c.dir) > 0;  // f grows away from the eye
+    for (int i = 0; i < count; ++i) order[n++] = descending ? count - 1 - i : i;
+  } else {
+    // Isovalues above f_T(eye), highest first; then those at or below it, lowest first.
+    const double fe = f0 + glm::dot(gradient(), c.eye - glm::dvec3(Unpack(v0)));
+    int split = 0;
+    while (split < count && iso(split) <= fe) ++split;
+    for (int i = count - 1; i >= split; --i) order[n++] = i;
+    for (int i = 0; i < split; ++i) order[n++] = i;
+  }
 }
 
 // The children of t in draw order: the farther one (drawn first) in *first.
