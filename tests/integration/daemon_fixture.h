@@ -89,12 +89,19 @@ inline bool ReadFrame(net::Session& s, net::Frame* out) {
 class Daemon : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
+    StartSuiteDaemon([](const std::string& dir) {
+      return std::vector<std::string>{"--cache-dir", dir + "/cache", "--threads", "2",
+                                      "--max-sessions", "3", "--max-isovalues", "4",
+                                      "--max-triangles", "1000000", "--max-dim", "129"};
+    });
+  }
+  // Makes the suite's scratch directory and starts its daemon with flags(that directory); a
+  // suite with other flags calls it from its own SetUpTestSuite.
+  static void StartSuiteDaemon(
+      const std::function<std::vector<std::string>(const std::string& dir)>& flags) {
     scratch_ = new ScratchDir();
     daemon_ = new DaemonProcess();
-    ASSERT_TRUE(daemon_->Start(
-        {"--cache-dir", scratch_->path() + "/cache", "--threads", "2", "--max-sessions", "3",
-         "--max-isovalues", "4", "--max-triangles", "1000000", "--max-dim", "129"},
-        scratch_->path() + "/isostreamd.log"));
+    ASSERT_TRUE(daemon_->Start(flags(scratch_->path()), scratch_->path() + "/isostreamd.log"));
   }
   static void TearDownTestSuite() {
     delete daemon_;

@@ -19,11 +19,10 @@ namespace {
 class GuardedDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
-    scratch_ = new ScratchDir();
-    daemon_ = new DaemonProcess();
-    ASSERT_TRUE(daemon_->Start({"--cache-dir", scratch_->path() + "/cache", "--threads", "2",
-                                "--token", "s3cret", "--max-triangles", "100000"},
-                               scratch_->path() + "/isostreamd.log"));
+    StartSuiteDaemon([](const std::string& dir) {
+      return std::vector<std::string>{"--cache-dir", dir + "/cache", "--threads", "2", "--token",
+                                      "s3cret", "--max-triangles", "100000"};
+    });
   }
 };
 
@@ -81,15 +80,14 @@ TEST_F(GuardedDaemon, SigtermFinishesTheFrameInFlightAndExitsZero) {
 class ConfiguredDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
-    scratch_ = new ScratchDir();
-    daemon_ = new DaemonProcess();
-    const std::string config = scratch_->path() + "/isostreamd.json";
-    std::ofstream(config)
-        << R"({"threads": 2, "volumes": {"ball": "buckyball:65", "big": "buckyball:129"},
-        "frames": {"chunk_triangles": 4096, "first_chunk_triangles": 1024,
-                   "max_queued_chunks": 4, "retain_mb": 0}})";
-    ASSERT_TRUE(daemon_->Start({"--config", config, "--cache-dir", scratch_->path() + "/cache"},
-                               scratch_->path() + "/isostreamd.log"));
+    StartSuiteDaemon([](const std::string& dir) {
+      const std::string config = dir + "/isostreamd.json";
+      std::ofstream(config)
+          << R"({"threads": 2, "volumes": {"ball": "buckyball:65", "big": "buckyball:129"},
+          "frames": {"chunk_triangles": 4096, "first_chunk_triangles": 1024,
+                     "max_queued_chunks": 4, "retain_mb": 0}})";
+      return std::vector<std::string>{"--config", config, "--cache-dir", dir + "/cache"};
+    });
   }
 };
 
@@ -219,10 +217,9 @@ TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
 class ImpatientDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
-    scratch_ = new ScratchDir();
-    daemon_ = new DaemonProcess();
-    ASSERT_TRUE(daemon_->Start({"--deadline-ms", "1", "--cache-dir", scratch_->path() + "/cache"},
-                               scratch_->path() + "/isostreamd.log"));
+    StartSuiteDaemon([](const std::string& dir) {
+      return std::vector<std::string>{"--deadline-ms", "1", "--cache-dir", dir + "/cache"};
+    });
   }
 };
 
@@ -240,11 +237,10 @@ TEST_F(ImpatientDaemon, SlowFrameIsDeadlineExceeded) {
 class IdleDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
-    scratch_ = new ScratchDir();
-    daemon_ = new DaemonProcess();
-    ASSERT_TRUE(daemon_->Start(
-        {"--idle-timeout-s", "1", "--threads", "2", "--cache-dir", scratch_->path() + "/cache"},
-        scratch_->path() + "/isostreamd.log"));
+    StartSuiteDaemon([](const std::string& dir) {
+      return std::vector<std::string>{"--idle-timeout-s", "1", "--threads", "2", "--cache-dir",
+                                      dir + "/cache"};
+    });
   }
 
   // Sends a small view and reads its frame to the end.
@@ -357,10 +353,9 @@ TEST_F(IdleDaemon, AFrameInFlightIsNotIdle) {
 class OneSlotDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
-    scratch_ = new ScratchDir();
-    daemon_ = new DaemonProcess();
-    ASSERT_TRUE(daemon_->Start({"--max-sessions", "1", "--no-cache", "--max-dim", "513"},
-                               scratch_->path() + "/isostreamd.log"));
+    StartSuiteDaemon([](const std::string&) {
+      return std::vector<std::string>{"--max-sessions", "1", "--no-cache", "--max-dim", "513"};
+    });
   }
   static bool Prepared(const std::string& name) {
     return DaemonLog(*scratch_).find("prepared volume '" + name + "'") != std::string::npos;
@@ -399,11 +394,10 @@ TEST_F(OneSlotDaemon, ACancelledJobHoldsItsSlotUntilItEnds) {
 class CrowdedDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
-    scratch_ = new ScratchDir();
-    daemon_ = new DaemonProcess();
-    ASSERT_TRUE(daemon_->Start({"--cache-dir", scratch_->path() + "/cache", "--retain-mb", "64",
-                                "--threads", "2"},
-                               scratch_->path() + "/isostreamd.log"));
+    StartSuiteDaemon([](const std::string& dir) {
+      return std::vector<std::string>{"--cache-dir", dir + "/cache", "--retain-mb", "64",
+                                      "--threads", "2"};
+    });
   }
 };
 
