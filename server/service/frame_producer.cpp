@@ -84,8 +84,8 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
                                 std::atomic<bool>* cancel, ChunkSink* sink,
                                 Clock::time_point received, CoarseHint* hint,
                                 RetainedFrame* retained) const {
-  const bool reorders = retained && retained->Find(volume, request) != nullptr;
-  if (view.progressive() && !reorders) {
+  const RetainedCut* same_mesh = retained ? retained->Find(volume, request) : nullptr;
+  if (view.progressive() && same_mesh == nullptr) {
     const int64_t coarse = settings_.coarse_triangles;
     bool want_coarse;
     if (request.budget > 0) {
@@ -121,15 +121,15 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
   }
   ExtractStats stats;
   return ProduceFrame(volume, view, request, false, generation, cancel, sink, received, &stats,
-                      retained);
+                      retained, same_mesh);
 }
 
 absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
                                          const ExtractRequest& request, bool coarse,
                                          uint64_t generation, std::atomic<bool>* cancel,
                                          ChunkSink* sink, Clock::time_point received,
-                                         ExtractStats* stats_out,
-                                         RetainedFrame* retained) const {
+                                         ExtractStats* stats_out, RetainedFrame* retained,
+                                         const RetainedCut* same_mesh) const {
   counters_->frames_started.fetch_add(1);
   const auto deadline = received + std::chrono::milliseconds(settings_.deadline_ms);
   const bool raw = view.codec() == pb::RAW;
@@ -274,7 +274,6 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
 
   ExtractRequest remembering = request;  // budget -> eps is the same for every view
   remembering.budget_memo = &volume.budget_memo;
-  const RetainedCut* same_mesh = retained ? retained->Find(volume, remembering) : nullptr;
   RetainedCut* recording =
       retained && !same_mesh ? retained->StartRecording(volume, remembering) : nullptr;
   auto result = same_mesh ? Reorder(*same_mesh, request.view, request.order, &observer)

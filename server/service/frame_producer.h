@@ -98,7 +98,8 @@ class FrameProducer {
                             const ExtractRequest& request, bool coarse, uint64_t generation,
                             std::atomic<bool>* cancel, ChunkSink* sink,
                             std::chrono::steady_clock::time_point received,
-                            ExtractStats* stats_out, RetainedFrame* retained = nullptr) const;
+                            ExtractStats* stats_out, RetainedFrame* retained = nullptr,
+                            const RetainedCut* same_mesh = nullptr) const;
 
   FrameSettings settings_;
   WorkerPool* encoders_;
