@@ -500,11 +500,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     cut.iso_count_ = c.iso_count;
     std::copy(c.iso, c.iso + c.iso_count, cut.iso_);
     cut.leaves_ = st.leaves;
-    // assign, not operator=: the cut's arrays keep their capacity from frame to frame.
-    cut.mesh_.positions.assign(m.positions.begin(), m.positions.end());
-    cut.mesh_.normals.assign(m.normals.begin(), m.normals.end());
-    cut.mesh_.triangles.assign(m.triangles.begin(), m.triangles.end());
-    cut.mesh_.surface.assign(m.surface.begin(), m.surface.end());
+    cut.pending_triangles_ = m.triangle_count();  // the caller keeps the mesh (KeepMesh)
+    cut.pending_vertices_ = m.vertex_count();
   }
   st.total_ms = Ms(t_start);
   return result;

@@ -21,12 +21,25 @@ bool RetainedCut::Serves(const ExtractRequest& r, double budget_eps) const {
   return budget_ == 0 && r.eps == eps_;
 }
 
+bool RetainedCut::KeepMesh(OrderedMesh&& frame) {
+  const bool recorded = pending_triangles_ == frame.triangle_count() &&
+                        pending_vertices_ == frame.vertex_count() && !isovalues_.empty();
+  if (!recorded) {
+    Clear();
+    return false;
+  }
+  mesh_ = std::move(frame);
+  pending_triangles_ = kNoneRecorded;
+  return true;
+}
+
 void RetainedCut::Clear() {
   isovalues_.clear();
+  pending_triangles_ = kNoneRecorded;
   eps_ = 0;
   budget_ = 0;
   iso_count_ = 0;
-  mesh_.clear();
+  mesh_ = OrderedMesh();  // the next frame's mesh is moved in, not copied into these
   top_.clear();
   for (extract_internal::CutPart& part : parts_) part.clear();
   part_first_triangle_.clear();
@@ -165,7 +178,7 @@ class Walker {
 absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, DrawOrder order,
                                       const ExtractObserver* observer) {
   const auto t_start = std::chrono::steady_clock::now();
-  if (cut.isovalues_.empty()) return absl::FailedPreconditionError("no frame retained");
+  if (cut.empty()) return absl::FailedPreconditionError("no frame retained");
   ExtractRequest check;
   check.isovalues = cut.isovalues_;
   check.eps = cut.eps_;

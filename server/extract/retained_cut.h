@@ -30,9 +30,15 @@ class RetainedCut {
   double eps_used() const { return eps_; }
   size_t triangle_count() const { return mesh_.triangle_count(); }
   size_t memory_bytes() const;
-  bool empty() const { return isovalues_.empty(); }
-  // Empties it, keeping its buffers for the next frame recorded into it (fresh ones cost a
-  // page fault per 4 KiB: ~12 k for a 1 M-triangle frame).
+  // True until a recorded frame has its mesh kept (KeepMesh).
+  bool empty() const { return isovalues_.empty() || pending_triangles_ != kNoneRecorded; }
+  // Extract records the frame's tree but leaves its triangles with the caller, who streams
+  // them meanwhile: the cut serves other views once the caller hands that frame back here,
+  // unchanged (moved, not copied: a copy cost ~25 MB of memory traffic per 1 M triangles).
+  // Returns false, the cut cleared, for a frame other than the one just recorded.
+  bool KeepMesh(OrderedMesh&& frame);
+  // Empties it, keeping its tree's buffers for the next frame recorded into it (fresh ones
+  // cost a page fault per 4 KiB); the mesh's are freed (the next one is moved in).
   void Clear();
 
  private:
@@ -53,6 +59,10 @@ class RetainedCut {
   int iso_count_ = 0;
 
   OrderedMesh mesh_;  // the frame, in the extraction's order
+  // Triangles of the frame recorded but not yet kept (KeepMesh), or kNoneRecorded.
+  static constexpr size_t kNoneRecorded = ~size_t{0};
+  size_t pending_triangles_ = kNoneRecorded;
+  size_t pending_vertices_ = 0;
   // The tree above the split's subtrees (kPart records stand for them), and the subtrees',
   // with the frame triangle each one's numbers start from.
   extract_internal::CutPart top_;

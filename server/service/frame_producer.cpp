@@ -297,7 +297,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   // The mesh is whole when the extraction ran to its end and nothing refused the frame after
   // (over max_triangles, say), even if a newer view superseded it on the way out.
   const bool whole_mesh = result.ok() && error.ok();
-  if (recording) retained->EndRecording(volume, whole_mesh);
+  if (recording) retained->EndRecording(volume, whole_mesh ? &result->mesh : nullptr);
   if (retained && whole_mesh) retained->Drew(volume, remembering, result->stats.triangles);
   if (complete) return absl::OkStatus();
   if (!error.ok()) return error;

@@ -132,9 +132,11 @@ class RetainedFrame {
     return &cut_;
   }
 
-  // The recording StartRecording began is over: `whole` if the frame was drawn completely (a
-  // frame stopped part way, or refused after it ran, is not kept).
-  void EndRecording(const ServedVolume& volume, bool whole) {
+  // The recording StartRecording began is over: `frame` is its mesh if it was drawn completely,
+  // moved into the cut, else null (a frame stopped part way, or refused after it ran, is not
+  // kept).
+  void EndRecording(const ServedVolume& volume, OrderedMesh* frame) {
+    const bool whole = frame != nullptr && cut_.KeepMesh(std::move(*frame));
     const int64_t held = int64_t(cut_.memory_bytes());
     if (whole) budget_->Held(held, int64_t(cut_.triangle_count()));
     if (held > charged_ && !budget_->TakeEvicting(held - charged_, this)) {

@@ -267,17 +267,21 @@ class RetainedFrameTest : public ::testing::Test {
     r.eps = 0.004;
     r.view.eye = {3, 2, 1};
   }
-  // Extracts r, recording into `cut` if given; returns the triangle count.
+  // Extracts r, recording into `cut` if given; returns the triangle count. The frame stays in
+  // `frame_`, for RetainedFrame::EndRecording.
   int64_t extract(RetainedCut* cut = nullptr) {
     auto res = Extract(*v().prepared.hierarchy, v().prepared.grid_to_world, r, nullptr, cut);
     EXPECT_TRUE(res.ok());
-    return res.ok() ? res->stats.triangles : 0;
+    if (!res.ok()) return 0;
+    frame_ = std::move(res->mesh);
+    return res->stats.triangles;
   }
   const ServedVolume& v() const { return *volume_; }
 
   VolumeCatalogue catalogue_{CatalogueOptions{}};
   ServedVolumePtr volume_;
   ExtractRequest r;
+  OrderedMesh frame_;  // the last extraction's
 };
 
 TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
@@ -291,7 +295,7 @@ TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
     RetainedCut* cut = frame.StartRecording(v, r);  // the second
     ASSERT_NE(cut, nullptr);
     const int64_t triangles = extract(cut);
-    frame.EndRecording(v, true);
+    frame.EndRecording(v, &frame_);
     frame.Drew(v, r, triangles);
     ASSERT_NE(frame.Find(v, r), nullptr);
     EXPECT_EQ(budget.used(), int64_t(frame.Find(v, r)->memory_bytes()));
@@ -301,7 +305,7 @@ TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
 
     // A frame that did not finish is not kept, and what was held stays charged until freed.
     ASSERT_NE(frame.StartRecording(v, r), nullptr);
-    frame.EndRecording(v, false);
+    frame.EndRecording(v, nullptr);
     EXPECT_EQ(frame.Find(v, r), nullptr);
     EXPECT_GT(budget.used(), 0);
 
@@ -315,7 +319,7 @@ TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
     cut = frame.StartRecording(v, r);
     ASSERT_NE(cut, nullptr);
     extract(cut);
-    frame.EndRecording(v, true);
+    frame.EndRecording(v, &frame_);
     EXPECT_NE(frame.Find(v, r), nullptr);
   }
   EXPECT_EQ(budget.used(), 0);  // the stream's end gives everything back
@@ -333,7 +337,7 @@ TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
   RetainedCut* cut = tight_frame.StartRecording(v, r);
   ASSERT_NE(cut, nullptr);
   extract(cut);
-  tight_frame.EndRecording(v, true);
+  tight_frame.EndRecording(v, &frame_);
   EXPECT_EQ(tight_frame.Find(v, r), nullptr);
   EXPECT_EQ(tight.used(), 0);
 }
@@ -348,7 +352,7 @@ TEST_F(RetainedFrameTest, FreesOtherStreamsFramesLeastRecentlyUsedFirst) {
     RetainedCut* cut = frame.StartRecording(v, r);
     if (cut == nullptr) return false;
     extract(cut);
-    frame.EndRecording(v, true);
+    frame.EndRecording(v, &frame_);
     return frame.Find(v, r) != nullptr;
   };
   RetainedFrame probe(nullptr);  // no budget: never records

@@ -24,6 +24,17 @@ const GridToWorld kXf{glm::dvec3(-1.0, -0.75, -1.25), glm::dvec3(2.0 / 64, 2.0 /
 
 using Case = testing::VolumeCase;
 
+// Extracts r, recording into *cut, and hands the cut a copy of the frame (KeepMesh), as the
+// daemon hands it the frame it streamed.
+absl::StatusOr<ExtractResult> ExtractRetaining(const Hierarchy& h, const GridToWorld& xf,
+                                               const ExtractRequest& r, RetainedCut* cut) {
+  auto res = Extract(h, xf, r, nullptr, cut);
+  if (res.ok()) {
+    EXPECT_TRUE(cut->KeepMesh(OrderedMesh(res->mesh)));
+  }
+  return res;
+}
+
 std::vector<Case> Volumes() {
   std::vector<Case> v;
   v.push_back({testing::MakeHierarchy(5, CayleyField), {-0.3f, 0.05f, 0.4f}, "cayley 33^3"});
@@ -89,7 +100,7 @@ TEST(RetainedCut, ReorderedForAnotherViewEqualsAFreshExtraction) {
           r.threads = 2;
           r.view = Perspective({-0.7 * n, 2.1 * n, 1.3 * n});
           RetainedCut cut;
-          auto first = Extract(h, kXf, r, nullptr, &cut);
+          auto first = ExtractRetaining(h, kXf, r, &cut);
           ASSERT_TRUE(first.ok()) << first.status();
           ASSERT_GT(first->mesh.triangle_count(), 50u) << vol.name;
           ASSERT_TRUE(cut.Serves(r));
@@ -136,7 +147,7 @@ ExtractResult RetainBlobs(RetainedCut* cut) {
   ExtractRequest r;
   r.isovalues = {0.2f, 0.5f, 0.8f};
   r.view = Perspective({-30, 70, 40});
-  auto a = Extract(*h, kXf, r, nullptr, cut);
+  auto a = ExtractRetaining(*h, kXf, r, cut);
   EXPECT_TRUE(a.ok()) << a.status();
   return a.ok() ? std::move(*a) : ExtractResult{};
 }
@@ -199,7 +210,7 @@ TEST(RetainedCut, ServesOnlyTheSameMesh) {
   r.view = Perspective({40, 40, 40});
   RetainedCut cut;
   EXPECT_FALSE(cut.Serves(r));  // nothing retained yet
-  ASSERT_TRUE(Extract(*h, GridToWorld{}, r, nullptr, &cut).ok());
+  ASSERT_TRUE(ExtractRetaining(*h, GridToWorld{}, r, &cut).ok());
   EXPECT_TRUE(cut.Serves(r));
   ExtractRequest other = r;
   other.eps = 0.02;
@@ -218,7 +229,7 @@ TEST(RetainedCut, ServesOnlyTheSameMesh) {
   // A budget request is served by a cut of the same budget.
   ExtractRequest budget = r;
   budget.budget = 300;
-  ASSERT_TRUE(Extract(*h, GridToWorld{}, budget, nullptr, &cut).ok());
+  ASSERT_TRUE(ExtractRetaining(*h, GridToWorld{}, budget, &cut).ok());
   EXPECT_TRUE(cut.Serves(budget));
   EXPECT_FALSE(cut.Serves(r));
 }
@@ -231,7 +242,7 @@ TEST(RetainedCut, BadViewsAndStoppedExtractionsGiveClearErrors) {
   RetainedCut cut;
   auto none = Reorder(cut, r.view);
   EXPECT_EQ(none.status().code(), absl::StatusCode::kFailedPrecondition);
-  ASSERT_TRUE(Extract(*h, GridToWorld{}, r, nullptr, &cut).ok());
+  ASSERT_TRUE(ExtractRetaining(*h, GridToWorld{}, r, &cut).ok());
   auto zero = Reorder(cut, Orthographic({0, 0, 0}));
   EXPECT_EQ(zero.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(zero.status().message().find("view direction is zero"), std::string::npos);
@@ -248,6 +259,37 @@ TEST(RetainedCut, BadViewsAndStoppedExtractionsGiveClearErrors) {
   EXPECT_EQ(stopped.status().code(), absl::StatusCode::kCancelled);
   EXPECT_FALSE(cut.Serves(r));
   EXPECT_EQ(Reorder(cut, r.view).status().code(), absl::StatusCode::kFailedPrecondition);
+}
+
+// A cut serves views only once it holds the frame it recorded: until the caller hands that
+// frame back, or when it hands another, re-ordering is refused.
+TEST(RetainedCut, ServesOnlyOnceItKeepsTheFrameItRecorded) {
+  const auto h = testing::MakeHierarchy(4, SphereField);
+  ExtractRequest r;
+  r.isovalues = {0.5f};
+  r.view = Perspective({40, 40, 40});
+  RetainedCut cut;
+  auto first = Extract(*h, GridToWorld{}, r, nullptr, &cut);
+  ASSERT_TRUE(first.ok());
+  ASSERT_GT(first->mesh.triangle_count(), 1u);
+  EXPECT_FALSE(cut.Serves(r));
+  EXPECT_EQ(Reorder(cut, r.view).status().code(), absl::StatusCode::kFailedPrecondition);
+  OrderedMesh shorter = first->mesh;
+  shorter.surface.pop_back();
+  shorter.triangles.resize(shorter.triangles.size() - 3);
+  EXPECT_FALSE(cut.KeepMesh(std::move(shorter)));
+  EXPECT_FALSE(cut.Serves(r));
+  EXPECT_FALSE(cut.KeepMesh(OrderedMesh(first->mesh)));  // cleared: nothing recorded now
+
+  auto second = Extract(*h, GridToWorld{}, r, nullptr, &cut);
+  ASSERT_TRUE(second.ok());
+  const OrderedMesh frame = second->mesh;
+  EXPECT_TRUE(cut.KeepMesh(std::move(second->mesh)));
+  EXPECT_TRUE(cut.Serves(r));
+  auto same_view = Reorder(cut, r.view);
+  ASSERT_TRUE(same_view.ok());
+  EXPECT_EQ(same_view->mesh.triangles, frame.triangles);
+  EXPECT_EQ(same_view->mesh.positions, frame.positions);
 }
 
 }  // namespace
