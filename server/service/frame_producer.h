@@ -86,8 +86,8 @@ class FrameProducer {
   // `hint` (may be null) is read and updated; one stream's views run one at a time, so it
   // needs no lock. So is `retained` (may be null; the caller holds its mutex): a refined frame
   // of the mesh it holds is re-ordered from it (no coarse frame first: the refined one comes as
-  // quickly); the second refined frame in a row of another mesh is recorded into it in its
-  // place (retained_frame.h says when it is freed).
+  // quickly); a refined frame of another mesh is recorded into it in its place, unless the
+  // stream is sliding through meshes (retained_frame.h says when, and when it is freed).
   absl::Status Run(const ServedVolume& volume, const pb::ViewRequest& view,
                    const ExtractRequest& request, uint64_t generation, std::atomic<bool>* cancel,
                    ChunkSink* sink, std::chrono::steady_clock::time_point received,

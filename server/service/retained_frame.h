@@ -113,12 +113,14 @@ class RetainedFrame {
   }
 
   // Where to record the refined frame about to be extracted for `request`, or null. A frame is
-  // recorded when the stream's previous refined frame drew the same mesh (a client moving
-  // around one mesh; recording costs the extraction up to ~20%, which a client changing the
-  // isovalues or eps with every view would pay for nothing), and when the budget has room for
-  // a frame of the previous one's size.
+  // recorded unless the stream is sliding through meshes (its last two refined frames drew
+  // different meshes, and this one is another again: a client changing the isovalues or eps
+  // with every view, who would pay for recording and never re-order), so that the view after
+  // a new mesh's first frame is already re-ordered; and only when the budget has room for a
+  // frame of the previous one's size.
   RetainedCut* StartRecording(const ServedVolume& volume, const ExtractRequest& request) {
-    if (budget_ == nullptr || budget_->limit() <= 0 || !last_.Same(volume, request)) return nullptr;
+    if (budget_ == nullptr || budget_->limit() <= 0) return nullptr;
+    if (sliding_ && !last_.Same(volume, request)) return nullptr;
     // The reserve is settled against what the buffers hold once the frame is in.
     const int64_t estimate = budget_->Estimate(last_triangles_);
     if (estimate > charged_) {
@@ -153,7 +155,9 @@ class RetainedFrame {
   // the stream has moved on to another mesh, what it held (a frame, or buffers of an unfinished
   // one) is freed.
   void Drew(const ServedVolume& volume, const ExtractRequest& request, int64_t triangles) {
-    if (charged_ > 0 && Find(volume, request) == nullptr && !last_.Same(volume, request)) Drop();
+    const bool same = last_.Same(volume, request);
+    if (charged_ > 0 && Find(volume, request) == nullptr && !same) Drop();
+    sliding_ = !same && last_.hierarchy != nullptr;
     last_ = MeshKey(volume, request);
     last_triangles_ = triangles;
   }
@@ -193,6 +197,7 @@ class RetainedFrame {
   std::mutex use_mu_;
   std::atomic<uint64_t> last_use_{0};
   MeshKey last_;  // the mesh of the last refined frame drawn
+  bool sliding_ = false;  // and it differs from the one drawn before it
   int64_t last_triangles_ = 0;
   RetainedCut cut_;
   bool holds_frame_ = false;  // cut_ holds a whole frame of the volume below

@@ -117,7 +117,7 @@ TEST_F(ConfiguredDaemon, RetainsNothingWhenItsBudgetIsZero) {
   auto session = c->OpenSession();
   ASSERT_TRUE(session.ok());
   net::Session& s = **session;
-  for (int i = 0; i < 3; ++i) {  // the third would be re-ordered with a budget (daemon_test)
+  for (int i = 0; i < 3; ++i) {  // with retain_mb > 0, views 2 and 3 are re-ordered (daemon_test)
     ASSERT_TRUE(s.Send(MakeView("ball", 40 + i, 0.003, glm::dvec3(2, 2 - 2 * i, 2))).ok());
     net::FrameAssembler assembler;
     pb::FrameChunk chunk;

@@ -131,11 +131,11 @@ TEST_F(Daemon, BudgetSearchRunsOnceAndLaterViewsReuseItsEps) {
 }
 
 
-// Within a session, once two refined frames in a row drew the same mesh (same volume,
-// isovalues, eps, normals), the second is kept and later views of that mesh are re-ordered
-// from it, not extracted again: the frame says so, and equals a direct extraction for its
-// view. A progressive request then skips its coarse frame; another eps is extracted, and the
-// memory the old mesh held is given back.
+// Within a session, a refined frame is kept and later views of its mesh (same volume,
+// isovalues, eps, normals) are re-ordered from it, not extracted again: the frame says so, and
+// equals a direct extraction for its view. A progressive request then skips its coarse frame;
+// another eps is extracted (and kept in the old mesh's place), and the session's end gives
+// the memory back.
 TEST_F(Daemon, NewViewOfTheSameMeshIsReorderedFromTheLastFrame) {
   auto c = Connect();
   auto before = c->GetServerStats();
@@ -156,18 +156,16 @@ TEST_F(Daemon, NewViewOfTheSameMeshIsReorderedFromTheLastFrame) {
     ASSERT_TRUE(ReadFrame(s, &frame));
     EXPECT_EQ(frame.id, uint64_t(80 + i));
     EXPECT_FALSE(frame.coarse) << "the re-ordered frame needs no coarse one before it";
-    EXPECT_EQ(frame.stats.reordered(), i == 2 || i == 3);
+    EXPECT_EQ(frame.stats.reordered(), i >= 1 && i <= 3);
     auto direct = Extract(*local.hierarchy, local.grid_to_world, DirectRequest(eps, eyes[i]));
     ASSERT_TRUE(direct.ok());
     ExpectSameFrame(direct->mesh, frame.mesh, 0.0f);
-    // The mesh is held while the session draws it, and given back once it draws another.
+    // The mesh is held while the session draws it.
     auto now = c->GetServerStats();
     ASSERT_TRUE(now.ok());
-    if (i == 3) {
-      EXPECT_GT(now->retained_bytes(), before->retained_bytes());
-    } else if (i == 4) {
-      EXPECT_EQ(now->retained_bytes(), before->retained_bytes());
-      EXPECT_EQ(now->frames_reordered(), before->frames_reordered() + 2);
+    EXPECT_GT(now->retained_bytes(), before->retained_bytes());
+    if (i == 4) {
+      EXPECT_EQ(now->frames_reordered(), before->frames_reordered() + 3);
     }
   }
   ASSERT_TRUE(s.CloseSend().ok());
@@ -182,7 +180,7 @@ TEST_F(Daemon, NewViewOfTheSameMeshIsReorderedFromTheLastFrame) {
       << after.retained_bytes();
 }
 
-// A triangle budget names a mesh as well as eps does: from its third view in a session the
+// A triangle budget names a mesh as well as eps does: from its second view in a session the
 // frame is re-ordered, and it is the frame a direct extraction at the remembered eps draws.
 TEST_F(Daemon, BudgetViewsAreReorderedToo) {
   constexpr int64_t kBudget = 23456;  // used by no other test of this daemon
@@ -199,7 +197,7 @@ TEST_F(Daemon, BudgetViewsAreReorderedToo) {
     ASSERT_TRUE(s.Send(v).ok());
     net::Frame frame;
     ASSERT_TRUE(ReadFrame(s, &frame));
-    EXPECT_EQ(frame.stats.reordered(), i == 2);
+    EXPECT_EQ(frame.stats.reordered(), i >= 1);
     EXPECT_LE(frame.stats.triangles(), kBudget);
     auto direct = Extract(*local.hierarchy, local.grid_to_world,
                           DirectRequest(frame.stats.eps_used(), eyes[i]));

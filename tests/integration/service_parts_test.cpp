@@ -253,7 +253,7 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   EXPECT_EQ(limited.frame().mesh.triangle_count(), next - sink.chunks_.back().triangle_count());
 }
 
-// A stream's retained frame: recorded on the second refined frame of a mesh, charged to the
+// A stream's retained frame: recorded unless the stream slides through meshes, charged to the
 // daemon's budget for what it holds, freed when the stream draws another mesh or the budget
 // has no room, and never kept from a frame that did not finish.
 // buckyball:65 served as the daemon serves it, and one request for two of its shells.
@@ -290,9 +290,7 @@ TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
   RetainBudget budget(int64_t{256} << 20);
   {
     RetainedFrame frame(&budget);
-    EXPECT_EQ(frame.StartRecording(v, r), nullptr);  // the first frame of a mesh
-    frame.Drew(v, r, extract());
-    RetainedCut* cut = frame.StartRecording(v, r);  // the second
+    RetainedCut* cut = frame.StartRecording(v, r);  // a session's first frame is recorded
     ASSERT_NE(cut, nullptr);
     const int64_t triangles = extract(cut);
     frame.EndRecording(v, &frame_);
@@ -340,6 +338,33 @@ TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
   tight_frame.EndRecording(v, &frame_);
   EXPECT_EQ(tight_frame.Find(v, r), nullptr);
   EXPECT_EQ(tight.used(), 0);
+}
+
+// A stream sliding through meshes (each refined frame of another mesh than the one before)
+// records nothing from its third mesh on; back on one mesh, it records again.
+TEST_F(RetainedFrameTest, SlidingThroughMeshesRecordsNothing) {
+  const ServedVolume& v = this->v();
+  RetainBudget budget(int64_t{256} << 20);
+  RetainedFrame frame(&budget);
+  // Draws r at `eps` as FrameProducer does; true if the frame was recorded.
+  auto draw = [&](double eps) {
+    r.eps = eps;
+    RetainedCut* cut = frame.StartRecording(v, r);
+    const int64_t triangles = extract(cut);
+    if (cut) frame.EndRecording(v, &frame_);
+    frame.Drew(v, r, triangles);
+    return cut != nullptr;
+  };
+  EXPECT_TRUE(draw(0.004));  // a session's first mesh
+  EXPECT_TRUE(draw(0.005));  // one change: a new mesh to look around
+  EXPECT_NE(frame.Find(v, r), nullptr);
+  EXPECT_FALSE(draw(0.006));  // sliding
+  EXPECT_EQ(budget.used(), 0);  // the last recorded mesh was freed
+  EXPECT_FALSE(draw(0.007));
+  EXPECT_TRUE(draw(0.007));  // the same mesh again: recorded, the next view is re-ordered
+  EXPECT_NE(frame.Find(v, r), nullptr);
+  EXPECT_TRUE(draw(0.004));  // a new mesh after a settled one
+  EXPECT_NE(frame.Find(v, r), nullptr);
 }
 
 // When the budget has no room for a stream's frame, the least recently used frames of other

@@ -94,7 +94,7 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   }
 }
 
-// An orbit around one mesh: from its third view the daemon re-orders its last frame instead of
+// An orbit around one mesh: from its second view the daemon re-orders its last frame instead of
 // extracting (FrameStats.reordered); the pictures are pixel for pixel those of a daemon that
 // retains nothing and extracts every view.
 TEST(View, ReorderedOrbitDrawsWhatExtractionDraws) {
@@ -120,7 +120,7 @@ TEST(View, ReorderedOrbitDrawsWhatExtractionDraws) {
     for (size_t p = 0; p < r->rgba.size(); ++p) differing += r->rgba[p] != e->rgba[p];
     EXPECT_EQ(differing, 0u);
   }
-  // The retaining daemon did re-order (views 3 and 4); the other never did.
+  // The retaining daemon did re-order (views 2 to 4); the other never did.
   auto stats = [](const testing::DaemonProcess& d) {
     net::ClientOptions o;
     o.address = d.address();
@@ -130,7 +130,7 @@ TEST(View, ReorderedOrbitDrawsWhatExtractionDraws) {
     EXPECT_TRUE(s.ok());
     return s.ok() ? *s : ::isostream::v1::ServerStats();
   };
-  EXPECT_EQ(stats(retaining).frames_reordered(), 2);
+  EXPECT_EQ(stats(retaining).frames_reordered(), 3);
   EXPECT_EQ(stats(extracting).frames_reordered(), 0);
   EXPECT_EQ(retaining.Stop(), 0);
   EXPECT_EQ(extracting.Stop(), 0);
