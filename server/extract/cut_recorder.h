@@ -53,6 +53,9 @@ struct CutPart {
     records.clear();
     multi.clear();
   }
+  size_t capacity_bytes() const {
+    return records.capacity() * sizeof(CutRecord) + multi.capacity() * sizeof(MultiLeaf);
+  }
 
   // Returns the record's index, for SecondChildStarts.
   uint32_t AddRefine(int64_t plane_side, TetClass cls, bool child0_drawn_first) {

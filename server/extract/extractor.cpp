@@ -113,8 +113,7 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
 // thread count) so the output is too. With a curve (a count pass that gathers one), the nodes
 // refined here add their share to it as the traversal's do, and pass their eta caps down.
 // With `top`, the refinements are recorded there too.
-std::vector<Node> SplitIntoSubtrees(const Context& c,
-                                    extract_internal::CountCurve* curve = nullptr,
+std::vector<Node> SplitIntoSubtrees(const Context& c, extract_internal::CountCurve* curve = nullptr,
                                     extract_internal::SplitTree* top = nullptr) {
   const ReferenceTets& tables = *c.tables;
   const int size = 1 << c.k;
@@ -359,7 +358,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   // node-based map spent a malloc and a free per boundary vertex inside the serial join.
   EdgeVertexTable boundary_ids(size_t{1} << 16);
   std::vector<uint32_t> to_global;
-  std::atomic<bool> halted{false};  // cancelled, or past the deadline (StopReason)
+  std::atomic<bool> halted{false};                 // cancelled, or past the deadline (StopReason)
+  std::atomic<bool> recording{retain != nullptr};  // false: the cut was refused room
   OrderedMesh& m = result.mesh;
   if (r.budget > 0) {
     // Reserving the frame's size up front saves growing the arrays by doubling, which would
@@ -461,9 +461,15 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
               return;
             }
             std::unique_ptr<SubtreeMesh> part = pool.Acquire();
-            if (retain) {
-              Traverser<true, true>(c, &table, part.get(), nullptr, &retain->parts_[i])
-                  .Run(items[i]);
+            if (retain && recording.load(std::memory_order_relaxed)) {
+              extract_internal::CutPart& records = retain->parts_[i];
+              const size_t before = records.capacity_bytes();
+              Traverser<true, true>(c, &table, part.get(), nullptr, &records).Run(items[i]);
+              // Each part's growth is asked for as it happens, so the recording never holds
+              // more than it was granted plus what its workers are recording at the moment.
+              const size_t after = records.capacity_bytes();
+              if (after > before && retain->reserve_ && !retain->reserve_(int64_t(after - before)))
+                recording = false;
             } else {
               Traverser<true>(c, &table, part.get()).Run(items[i]);
             }
@@ -488,7 +494,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   st.triangles = int64_t(m.triangle_count());
   st.vertices = int64_t(m.vertex_count());
   for (uint8_t s : m.surface) ++st.triangles_per_surface[s];
-  if (retain) {
+  if (retain && !recording) retain->Release();
+  if (retain && recording) {
     RetainedCut& cut = *retain;
     top.Record(&cut.top_, cut.root_begin_.data(), cut.root_end_.data());
     cut.isovalues_ = r.isovalues;

@@ -48,15 +48,21 @@ void RetainedCut::Clear() {
   leaves_ = 0;
 }
 
-size_t RetainedCut::memory_bytes() const {
-  auto part_bytes = [](const extract_internal::CutPart& p) {
-    return p.records.capacity() * sizeof(CutRecord) + p.multi.capacity() * sizeof(MultiLeaf);
-  };
-  size_t bytes = (mesh_.positions.capacity() + mesh_.normals.capacity()) * sizeof(float) +
-                 mesh_.triangles.capacity() * sizeof(uint32_t) + mesh_.surface.capacity() +
-                 part_bytes(top_) + part_first_triangle_.capacity() * sizeof(uint32_t);
-  for (const extract_internal::CutPart& part : parts_) bytes += part_bytes(part);
+void RetainedCut::Release() {
+  ReserveFn reserve = std::move(reserve_);
+  *this = RetainedCut();
+  reserve_ = std::move(reserve);
+}
+
+size_t RetainedCut::tree_bytes() const {
+  size_t bytes = top_.capacity_bytes() + part_first_triangle_.capacity() * sizeof(uint32_t);
+  for (const extract_internal::CutPart& part : parts_) bytes += part.capacity_bytes();
   return bytes;
+}
+
+size_t RetainedCut::memory_bytes() const {
+  return tree_bytes() + (mesh_.positions.capacity() + mesh_.normals.capacity()) * sizeof(float) +
+         mesh_.triangles.capacity() * sizeof(uint32_t) + mesh_.surface.capacity();
 }
 
 namespace {

@@ -12,6 +12,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "server/extract/cut_recorder.h"
@@ -40,6 +41,16 @@ class RetainedCut {
   // Empties it, keeping its tree's buffers for the next frame recorded into it (fresh ones
   // cost a page fault per 4 KiB); the mesh's are freed (the next one is moved in).
   void Clear();
+  // Empties it and frees every buffer.
+  void Release();
+  // What its tree's buffers hold (memory_bytes without the mesh).
+  size_t tree_bytes() const;
+
+  // Asked, from the extraction's worker threads, for each `bytes` the recording's buffers grow
+  // by, as they grow (once per subtree of the split): false stops the recording (the frame is
+  // still extracted, and the cut released). Unset: every growth is granted.
+  using ReserveFn = std::function<bool(int64_t bytes)>;
+  void SetReserve(ReserveFn reserve) { reserve_ = std::move(reserve); }
 
  private:
   friend absl::StatusOr<ExtractResult> Extract(const Hierarchy&, const GridToWorld&,
@@ -71,6 +82,7 @@ class RetainedCut {
   // Records of initial tetrahedron i in top_: [root_begin_[i], root_end_[i]).
   std::array<uint32_t, kNumInitialTets> root_begin_{}, root_end_{};
   int64_t leaves_ = 0;
+  ReserveFn reserve_;
 };
 
 // The cut's mesh drawn for `view` in `order`: the same result as Extract for that view (stats:

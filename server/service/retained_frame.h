@@ -76,14 +76,17 @@ class RetainBudget {
 };
 
 // One stream's retained frame. Its buffers, kept or not, are charged to the budget for what
-// they hold (their capacity), from before a frame is recorded into them (an estimate, settled
-// after) until they are freed. Its stream's job holds mutex() while it uses the frame (one view
+// they hold (their capacity), from before a frame is recorded into them (an estimate; the
+// records' growth past it is asked for as it happens, and the whole settled after) until they
+// are freed. Its stream's job holds mutex() while it uses the frame (one view
 // at a time); other streams' jobs may free it meanwhile only when that lock is free
 // (RetainBudget::TakeEvicting).
 class RetainedFrame {
  public:
   explicit RetainedFrame(RetainBudget* budget) : budget_(budget) {
-    if (budget_) budget_->Register(this);
+    if (budget_ == nullptr) return;
+    budget_->Register(this);
+    cut_.SetReserve([this](int64_t bytes) { return Reserve(bytes); });
   }
   ~RetainedFrame() {
     if (budget_) budget_->Unregister(this);  // first: no evictor reaches it after
@@ -131,6 +134,9 @@ class RetainedFrame {
       charged_ = estimate;
     }
     holds_frame_ = false;  // the buffers are being rewritten
+    // The extraction frees the old mesh first: what is charged is the tree's to grow into.
+    tree_bytes_at_start_ = int64_t(cut_.tree_bytes());
+    tree_growth_ = 0;
     return &cut_;
   }
 
@@ -164,7 +170,7 @@ class RetainedFrame {
 
   // Frees the buffers and gives their memory back to the budget.
   void Drop() {
-    cut_ = RetainedCut();
+    cut_.Release();
     hierarchy_.reset();
     holds_frame_ = false;
     if (charged_ > 0) budget_->Give(charged_);
@@ -193,10 +199,26 @@ class RetainedFrame {
     NormalMode normals = NormalMode::kSmooth;
   };
 
+  // The recording's tree grew by `bytes` (called by the extraction's workers, as each subtree's
+  // records grow): what it then holds past what is charged is taken from the budget, freeing
+  // other streams' frames if need be; false (the recording stops) if there is no room. So the
+  // budget is overshot at most by what the workers are recording at the moment.
+  bool Reserve(int64_t bytes) {
+    std::lock_guard<std::mutex> lock(reserve_mu_);
+    tree_growth_ += bytes;
+    const int64_t need = tree_bytes_at_start_ + tree_growth_ - charged_;
+    if (need <= 0) return true;
+    if (!budget_->TakeEvicting(need, this)) return false;
+    charged_ += need;
+    return true;
+  }
+
   RetainBudget* budget_;
   std::mutex use_mu_;
+  std::mutex reserve_mu_;  // Reserve's, from the recording extraction's workers
+  int64_t tree_bytes_at_start_ = 0, tree_growth_ = 0;  // of the recording
   std::atomic<uint64_t> last_use_{0};
-  MeshKey last_;  // the mesh of the last refined frame drawn
+  MeshKey last_;          // the mesh of the last refined frame drawn
   bool sliding_ = false;  // and it differs from the one drawn before it
   int64_t last_triangles_ = 0;
   RetainedCut cut_;

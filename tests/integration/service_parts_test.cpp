@@ -328,13 +328,25 @@ TEST_F(RetainedFrameTest, RecordsKeepsAndFreesWithinTheBudget) {
   frame.Drew(v, r, 50000);
   EXPECT_EQ(frame.StartRecording(v, r), nullptr);
   EXPECT_EQ(small.used(), 0);
-  // An estimate that fits but a frame that does not: dropped when it is settled.
-  RetainBudget tight(int64_t{1} << 20);
+  // An estimate that fits but a frame that does not: the recording stops once its records
+  // outgrow the budget, never holding much past it, and nothing is kept.
+  int64_t tree = 0;
+  {
+    RetainBudget roomy(int64_t{1} << 40);
+    RetainedFrame sizing(&roomy);
+    RetainedCut* full = sizing.StartRecording(v, r);
+    ASSERT_NE(full, nullptr);
+    extract(full);
+    tree = int64_t(full->tree_bytes());
+  }
+  RetainBudget tight(tree / 2);
   RetainedFrame tight_frame(&tight);
   tight_frame.Drew(v, r, 100);
   RetainedCut* cut = tight_frame.StartRecording(v, r);
   ASSERT_NE(cut, nullptr);
   extract(cut);
+  EXPECT_LE(tight.used(), tight.limit());
+  EXPECT_EQ(cut->tree_bytes(), 0u);  // released when refused room
   tight_frame.EndRecording(v, &frame_);
   EXPECT_EQ(tight_frame.Find(v, r), nullptr);
   EXPECT_EQ(tight.used(), 0);

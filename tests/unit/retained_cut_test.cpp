@@ -292,5 +292,43 @@ TEST(RetainedCut, ServesOnlyOnceItKeepsTheFrameItRecorded) {
   EXPECT_EQ(same_view->mesh.positions, frame.positions);
 }
 
+// A recording asks for each growth of its buffers as it happens: granted, it asks for what its
+// tree holds; refused, it stops and the cut is released, the frame itself drawn all the same.
+TEST(RetainedCut, AsksForRoomAsItsRecordsGrow) {
+  const auto h = testing::MakeHierarchy(5, CayleyField);
+  ExtractRequest r;
+  r.isovalues = {-0.3f, 0.05f, 0.4f};
+  r.view = Perspective({-30, 70, 40});
+  r.threads = 2;
+  RetainedCut cut;
+  std::atomic<int64_t> granted{0};
+  cut.SetReserve([&](int64_t bytes) {
+    granted += bytes;
+    return true;
+  });
+  auto kept = Extract(*h, kXf, r, nullptr, &cut);
+  ASSERT_TRUE(kept.ok());
+  // The subtrees' records are asked for; the split's few above them are not.
+  EXPECT_GT(granted.load(), int64_t(cut.tree_bytes()) / 2);
+  EXPECT_LE(granted.load(), int64_t(cut.tree_bytes()));
+  EXPECT_TRUE(cut.KeepMesh(OrderedMesh(kept->mesh)));
+
+  RetainedCut refused;
+  std::atomic<int> asked{0};
+  refused.SetReserve([&](int64_t) {
+    ++asked;
+    return false;
+  });
+  auto drawn = Extract(*h, kXf, r, nullptr, &refused);
+  ASSERT_TRUE(drawn.ok());
+  EXPECT_EQ(drawn->mesh.triangles, kept->mesh.triangles);
+  EXPECT_EQ(drawn->mesh.positions, kept->mesh.positions);
+  EXPECT_GE(asked.load(), 1);
+  EXPECT_LE(asked.load(), 2);  // once per worker at most: they stop recording
+  EXPECT_EQ(refused.tree_bytes(), 0u);
+  EXPECT_FALSE(refused.KeepMesh(std::move(drawn->mesh)));
+  EXPECT_FALSE(refused.Serves(r));
+}
+
 }  // namespace
 }  // namespace isostream
