@@ -146,19 +146,23 @@ class StreamBase : public ChunkSink, public std::enable_shared_from_this<StreamB
   virtual ~StreamBase() = default;
   virtual void Drain() = 0;
   virtual void RunJobs() = 0;
-  // Ends the stream with DEADLINE_EXCEEDED if it is subject to the idle timeout and has had
-  // no request and nothing in flight since `now - timeout`.
-  virtual void CloseIfIdle(Clock::time_point now, std::chrono::seconds timeout) = 0;
+  // Ends the stream with DEADLINE_EXCEEDED if it is subject to the idle timeout (`idle`, 0:
+  // none) and has had no request and nothing in flight since `now - idle`, or if the client
+  // has not taken a write for `stall` (it stopped reading).
+  virtual void Reap(Clock::time_point now, std::chrono::milliseconds idle,
+                    std::chrono::milliseconds stall) = 0;
 };
 
 void ServiceCore::StartIdleReaper() {
-  const auto timeout = std::chrono::seconds(config.limits.idle_timeout_s);
-  if (timeout.count() <= 0) return;
-  // A session ends at most a tenth of the timeout (or a second) after it became idle enough.
+  const std::chrono::milliseconds idle = std::chrono::seconds(config.limits.idle_timeout_s);
+  // A write the client has not taken for a whole frame deadline will not be: the frame that
+  // made it has failed by then (it waits that long for room in the stream at most).
+  const std::chrono::milliseconds stall(config.limits.deadline_ms);
+  // A stream ends at most a tenth of its timeout (or a second) after it became idle enough.
+  const auto shortest = idle.count() > 0 ? std::min(idle, stall) : stall;
   const auto period = std::clamp<std::chrono::milliseconds>(
-      std::chrono::duration_cast<std::chrono::milliseconds>(timeout) / 10,
-      std::chrono::milliseconds(50), std::chrono::milliseconds(1000));
-  idle_reaper = std::thread([this, timeout, period] {
+      shortest / 10, std::chrono::milliseconds(50), std::chrono::milliseconds(1000));
+  idle_reaper = std::thread([this, idle, stall, period] {
     std::unique_lock<std::mutex> lock(reaper_mu);
     while (!reaper_cv.wait_for(lock, period, [&] { return reaper_stop; })) {
       std::vector<std::shared_ptr<StreamBase>> open;
@@ -168,7 +172,7 @@ void ServiceCore::StartIdleReaper() {
           if (auto s = weak.lock()) open.push_back(std::move(s));
       }
       const Clock::time_point now = Clock::now();
-      for (auto& s : open) s->CloseIfIdle(now, timeout);
+      for (auto& s : open) s->Reap(now, idle, stall);
     }
   });
 }
@@ -324,19 +328,40 @@ class ChunkStream : public Reactor, public StreamBase {
     std::shared_ptr<StreamBase> keep = std::move(self_);  // may destroy *this on return
   }
 
-  void CloseIfIdle(Clock::time_point now, std::chrono::seconds timeout) override {
+  void Reap(Clock::time_point now, std::chrono::milliseconds idle,
+            std::chrono::milliseconds stall) override {
     std::optional<grpc::Status> finish;
+    bool cancel_call = false;
     {
       std::lock_guard<std::mutex> lock(mu_);
-      if (!idle_timeout_applies_ || finishing_ || job_running_ || pending_ || !queue_.empty() ||
-          write_in_flight_ || now - last_activity_ < timeout) {
-        return;
+      if (write_in_flight_ && !finish_called_ && !cancelling_ && now - write_started_ >= stall) {
+        // Finishing waits for the write in flight, which a client that stopped reading never
+        // takes: the call is cancelled instead (the write then fails, and the stream finishes
+        // with the status set here).
+        spdlog::info("{}: the client took no data for {} ms, ending the stream", peer_,
+                     stall.count());
+        core_->counters.streams_stalled.fetch_add(1);
+        FailLocked(grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                                "the client read nothing for " + std::to_string(stall.count()) +
+                                    " ms"));
+        cancelling_ = true;  // no Finish (so no OnDone: context_ stays valid) until TryCancel
+        cancel_call = true;
+      } else if (idle.count() > 0 && idle_timeout_applies_ && !finishing_ && !job_running_ &&
+                 !pending_ && queue_.empty() && !write_in_flight_ &&
+                 now - last_activity_ >= idle) {
+        const auto seconds = std::chrono::duration_cast<std::chrono::seconds>(idle).count();
+        spdlog::info("{}: session idle for {} s, closing it", peer_, seconds);
+        core_->counters.sessions_idle_closed.fetch_add(1);
+        FailLocked(grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                                "session idle for " + std::to_string(seconds) +
+                                    " s (no view request); open a new session to continue"));
+        finish = TakeFinishLocked();
       }
-      spdlog::info("{}: session idle for {} s, closing it", peer_, timeout.count());
-      core_->counters.sessions_idle_closed.fetch_add(1);
-      FailLocked(grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
-                              "session idle for " + std::to_string(timeout.count()) +
-                                  " s (no view request); open a new session to continue"));
+    }
+    if (cancel_call) {
+      context_->TryCancel();
+      std::lock_guard<std::mutex> lock(mu_);
+      cancelling_ = false;
       finish = TakeFinishLocked();
     }
     if (finish) this->Finish(*finish);
@@ -468,7 +493,7 @@ class ChunkStream : public Reactor, public StreamBase {
   }
 
   std::optional<grpc::Status> TakeFinishLocked() {
-    if (!finishing_ || finish_called_ || write_in_flight_) return std::nullopt;
+    if (!finishing_ || finish_called_ || write_in_flight_ || cancelling_) return std::nullopt;
     finish_called_ = true;
     return finish_status_;
   }
@@ -491,6 +516,7 @@ class ChunkStream : public Reactor, public StreamBase {
     writing_ = std::move(queue_.front());
     queue_.pop_front();
     write_in_flight_ = true;
+    write_started_ = Clock::now();
     return true;
   }
 
@@ -520,6 +546,8 @@ class ChunkStream : public Reactor, public StreamBase {
   pb::FrameChunk writing_;          // the chunk in flight
   grpc::ByteBuffer writing_bytes_;  // its bytes, which gRPC reads until OnWriteDone
   bool write_in_flight_ = false;
+  Clock::time_point write_started_;  // of the write in flight
+  bool cancelling_ = false;          // Reap is cancelling the call: Finish waits
   uint64_t generation_ = 0;
   std::shared_ptr<std::atomic<bool>> cancel_ = std::make_shared<std::atomic<bool>>(false);
   std::optional<Pending> pending_;
@@ -757,6 +785,7 @@ pb::ServerStats IsostreamService::Stats() const {
   s.set_sessions_closed(c.sessions_closed.load());
   s.set_sessions_rejected(c.sessions_rejected.load());
   s.set_sessions_idle_closed(c.sessions_idle_closed.load());
+  s.set_streams_stalled(c.streams_stalled.load());
   s.set_frames_started(c.frames_started.load());
   s.set_frames_sent(c.frames_sent.load());
   s.set_frames_cancelled(c.frames_cancelled.load());

@@ -12,6 +12,7 @@ struct ServerCounters {
   std::atomic<int64_t> sessions_closed{0};
   std::atomic<int64_t> sessions_rejected{0};
   std::atomic<int64_t> sessions_idle_closed{0};
+  std::atomic<int64_t> streams_stalled{0};  // ended: the client took no data for a deadline
   std::atomic<int64_t> frames_started{0};
   std::atomic<int64_t> frames_sent{0};
   std::atomic<int64_t> frames_cancelled{0};

@@ -388,6 +388,53 @@ TEST_F(OneSlotDaemon, ACancelledJobHoldsItsSlotUntilItEnds) {
   if (refused == 0) GTEST_SKIP() << "the preparation ended before the first call";
 }
 
+// One slot, a 2 s frame deadline and no idle timeout: a client that stops reading must not keep
+// the slot (a write it never takes would otherwise hold the stream open for good).
+class StalledClientDaemon : public Daemon {
+ protected:
+  static void SetUpTestSuite() {
+    StartSuiteDaemon([](const std::string& dir) {
+      return std::vector<std::string>{"--max-sessions", "1", "--deadline-ms", "2000",
+                                      "--idle-timeout-s", "0", "--cache-dir", dir + "/cache"};
+    });
+  }
+};
+
+TEST_F(StalledClientDaemon, AClientThatStopsReadingLosesItsSlot) {
+  using Clock = std::chrono::steady_clock;
+  auto c = Connect();
+  auto stalled = c->OpenSession();
+  ASSERT_TRUE(stalled.ok());
+  // ~1.5 M triangles, raw: ~40 MB, far past what the transport buffers between the two hold.
+  ASSERT_TRUE(
+      (*stalled)->Send(MakeView("buckyball:257", 1, 0.0005, glm::dvec3(2, 2, 2), pb::RAW)).ok());
+  // It never reads. Another client gets the slot once the stalled write has been given up on.
+  const Clock::time_point t0 = Clock::now();
+  bool served = false;
+  int refused = 0;
+  while (!served && Clock::now() - t0 < std::chrono::seconds(40)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+    auto other = Connect()->Fetch(MakeView("buckyball:65", 2, 0.05, glm::dvec3(2, 2, 2)));
+    served = other.ok();
+    if (!served) {
+      EXPECT_EQ(other.status().code(), absl::StatusCode::kResourceExhausted) << other.status();
+      ++refused;
+    }
+  }
+  EXPECT_TRUE(served) << "the stalled client kept its slot for 40 s";
+  EXPECT_GT(refused, 0) << "the stalled frame ended before the first call: nothing tested";
+  // Its stream was ended with a reason.
+  pb::FrameChunk chunk;
+  while ((*stalled)->Read(&chunk)) {
+  }
+  const absl::Status ended = (*stalled)->Finish();
+  EXPECT_FALSE(ended.ok());
+  auto stats = c->GetServerStats();
+  ASSERT_TRUE(stats.ok());
+  EXPECT_EQ(stats->sessions_open(), 0);
+  EXPECT_EQ(stats->streams_stalled(), 1);
+}
+
 // Sessions orbiting meshes of their own at once: frames are recorded and re-ordered on several
 // streams concurrently (eviction between streams is RetainedFrameTest's), every frame is still
 // the one a direct extraction draws, and nothing stays retained after.
