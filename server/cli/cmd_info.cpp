@@ -16,15 +16,8 @@ namespace {
 // For --iso: the triangle count at each octave of eps, from one counting pass at eps 0 (the
 // count changes only at the hierarchy's eta codes, CountTrianglesPerEtaCode), down to where it
 // reaches the full-resolution count.
-int PrintCountsByEps(const PreparedVolume& prepared, const std::string& iso_text, int threads) {
-  ExtractRequest r;
-  auto iso = ParseIsovalues(iso_text);
-  if (!iso.ok()) {
-    std::cerr << "isostream info: " << iso.status().message() << "\n";
-    return 2;
-  }
-  r.isovalues = std::move(*iso);
-  r.threads = threads;
+int PrintCountsByEps(const PreparedVolume& prepared, ExtractRequest r,
+                     const std::string& iso_text) {
   const uint32_t top = CoarsestEtaCode(*prepared.hierarchy);
   const auto t0 = std::chrono::steady_clock::now();
   auto counts = CountTrianglesPerEtaCode(*prepared.hierarchy, prepared.grid_to_world, r, 0, top);
@@ -39,8 +32,14 @@ int PrintCountsByEps(const PreparedVolume& prepared, const std::string& iso_text
   std::printf("  %-12s  %s\n", "eps", "triangles");
   const int64_t full = (*counts)[0];
   uint32_t code = top;
+  int64_t shown = -1;
   for (;; code = code > kEtaCodesPerOctave ? code - kEtaCodesPerOctave : 0) {
-    std::printf("  %-12g  %lld\n", EtaCodeEps(code), (long long)(*counts)[code]);
+    // An octave that adds nothing is not a row (the count may stay put for dozens of octaves
+    // of tiny eps, down to eps 0).
+    if ((*counts)[code] != shown) {
+      std::printf("  %-12g  %lld\n", EtaCodeEps(code), (long long)(*counts)[code]);
+      shown = (*counts)[code];
+    }
     // Past 99% of the full-resolution count the octaves add little: that count closes.
     if (code == 0 || 100 * (*counts)[code] >= 99 * full) break;
   }
@@ -49,6 +48,21 @@ int PrintCountsByEps(const PreparedVolume& prepared, const std::string& iso_text
 }
 
 int RunInfo(const VolumeArgs& args, const std::string& iso) {
+  // The isovalues are checked before the volume is prepared, which may take minutes.
+  ExtractRequest counting;
+  counting.threads = args.threads;
+  if (!iso.empty()) {
+    auto parsed = ParseIsovalues(iso);
+    absl::Status valid = parsed.status();
+    if (parsed.ok()) {
+      counting.isovalues = std::move(*parsed);
+      valid = ValidateRequest(counting);
+    }
+    if (!valid.ok()) {
+      std::cerr << "isostream info: " << valid.message() << "\n";
+      return 2;
+    }
+  }
   auto prepared = Prepare(args);
   if (!prepared.ok()) {
     std::cerr << "isostream info: " << prepared.status().message() << "\n";
@@ -78,7 +92,7 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
               CacheOutcomeName(prepared->cache));
   if (!prepared->cache_note.empty())
     std::printf("cache         %s\n", prepared->cache_note.c_str());
-  if (!iso.empty()) return PrintCountsByEps(*prepared, iso, args.threads);
+  if (!iso.empty()) return PrintCountsByEps(*prepared, counting, iso);
   return 0;
 }
 

@@ -14,6 +14,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include "server/service/config.h"
@@ -121,8 +122,7 @@ int main(int argc, char** argv) {
   std::string config_file, listen, cache_dir, tls_cert, tls_key, token, log_level;
   std::vector<std::string> volumes;
   int threads = 0, max_sessions = 0, max_isovalues = 0, max_dim = 0, chunk_triangles = 0;
-  int64_t max_triangles = 0, deadline_ms = 0, idle_timeout_s = 0, cache_max_mb = 0,
-          retain_mb = 0;
+  int64_t max_triangles = 0, deadline_ms = 0, idle_timeout_s = 0, cache_max_mb = 0, retain_mb = 0;
   bool no_cache = false;
   app.add_option("--config", config_file, "JSON config file (flags override it)");
   auto* o_listen = app.add_option("--listen", listen,
@@ -180,10 +180,15 @@ int main(int argc, char** argv) {
   }
   if (*o_listen) config.listen = listen;
   if (*o_volume) {
+    std::set<std::string> seen;  // a flag may replace a config file's entry, not another flag's
     for (const std::string& v : volumes) {
       const size_t eq = v.find('=');
       if (eq == std::string::npos || eq == 0 || eq + 1 == v.size()) {
         std::fprintf(stderr, "isostreamd: --volume wants NAME=SPEC, got '%s'\n", v.c_str());
+        return 2;
+      }
+      if (!seen.insert(v.substr(0, eq)).second) {
+        std::fprintf(stderr, "isostreamd: --volume names '%s' twice\n", v.substr(0, eq).c_str());
         return 2;
       }
       config.volumes[v.substr(0, eq)] = v.substr(eq + 1);

@@ -16,6 +16,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
 #include <limits>
@@ -47,6 +48,15 @@ absl::Status ValidateRequest(const ExtractRequest& r) {
                                       std::to_string(r.isovalues.size()));
   for (float v : r.isovalues)
     if (!std::isfinite(v)) return absl::InvalidArgumentError("isovalue is not a finite number");
+  // One surface drawn twice would blend over itself; a repeated value is a caller's mistake.
+  std::vector<float> sorted = r.isovalues;
+  std::sort(sorted.begin(), sorted.end());
+  for (size_t i = 1; i < sorted.size(); ++i)
+    if (sorted[i] == sorted[i - 1]) {
+      char shown[32];
+      std::snprintf(shown, sizeof(shown), "%.9g", double(sorted[i]));
+      return absl::InvalidArgumentError(std::string("isovalue ") + shown + " is given twice");
+    }
   if (r.budget < 0) return absl::InvalidArgumentError("triangle budget must be positive");
   if (r.budget == 0 && !(r.eps >= 0 && std::isfinite(r.eps)))
     return absl::InvalidArgumentError("eps must be a finite number >= 0");

@@ -19,8 +19,9 @@ std::string Quoted(const std::string& name) {
   return "'" + name.substr(0, kShown) + "...' (" + std::to_string(name.size()) + " bytes)";
 }
 
-bool AllDigits(const std::string& s) {
-  return !s.empty() && s.size() <= 9 &&
+// Decimal digits only, at most `max_digits` of them (so that they parse without overflow).
+bool AllDigits(const std::string& s, size_t max_digits = 9) {
+  return !s.empty() && s.size() <= max_digits &&
          std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
 }
 
@@ -40,8 +41,11 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim) {
   std::string rest = spec.substr(colon + 1);
   const size_t seed_colon = rest.find(':');
   if (seed_colon != std::string::npos) {
-    if (kind != "noise" || !AllDigits(rest.substr(seed_colon + 1)))
-      return absl::NotFoundError("unknown volume " + Quoted(spec));
+    if (kind != "noise") return absl::NotFoundError("unknown volume " + Quoted(spec));
+    const std::string seed = rest.substr(seed_colon + 1);
+    if (!AllDigits(seed, 10) || std::stoull(seed) > 0xffffffffull)
+      return absl::NotFoundError("unknown volume " + Quoted(spec) +
+                                 ": a noise SEED is an integer in [0, 2^32)");
     rest = rest.substr(0, seed_colon);
   }
   if (!AllDigits(rest)) return absl::NotFoundError("unknown volume " + Quoted(spec));

@@ -1,9 +1,11 @@
 #include "server/service/config.h"
 
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
+#include <type_traits>
 
 namespace isostream::service {
 namespace {
@@ -19,11 +21,23 @@ absl::Status CheckKeys(const json& object, const std::set<std::string>& known,
   return absl::OkStatus();
 }
 
-// Reads object[key] into *out when present; a wrong type names the key.
+// Reads object[key] into *out when present; a wrong type names the key. An integer setting
+// takes whole numbers in its type's range only (2.5 or 1e20 would otherwise be cut or wrap).
 template <class T>
 absl::Status Get(const json& object, const char* key, const std::string& where, T* out) {
   auto it = object.find(key);
   if (it == object.end()) return absl::OkStatus();
+  if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+    const bool fits =
+        it->is_number_unsigned()  ? it->get<uint64_t>() <= uint64_t(std::numeric_limits<T>::max())
+        : it->is_number_integer() ? it->get<int64_t>() >= int64_t(std::numeric_limits<T>::min()) &&
+                                        it->get<int64_t>() <= int64_t(std::numeric_limits<T>::max())
+                                  : false;
+    if (it->is_number() && !fits)
+      return absl::InvalidArgumentError("'" + where + key + "' must be a whole number in " +
+                                        std::to_string(std::numeric_limits<T>::min()) + ".." +
+                                        std::to_string(std::numeric_limits<T>::max()));
+  }
   try {
     *out = it->get<T>();
   } catch (const json::exception&) {
@@ -35,8 +49,8 @@ absl::Status Get(const json& object, const char* key, const std::string& where, 
 absl::Status Parse(const json& j, DaemonConfig* c) {
   ISOSTREAM_RETURN_IF_ERROR(
       CheckKeys(j,
-                {"listen", "threads", "cache_dir", "no_cache", "cache_max_mb", "volumes",
-                 "preload", "token", "tls", "limits", "frames", "log_level", "shutdown_grace_ms"},
+                {"listen", "threads", "cache_dir", "no_cache", "cache_max_mb", "volumes", "preload",
+                 "token", "tls", "limits", "frames", "log_level", "shutdown_grace_ms"},
                 ""));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "listen", "", &c->listen));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "threads", "", &c->threads));
@@ -69,11 +83,10 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
   }
   if (j.contains("frames")) {
     const json& f = j["frames"];
-    ISOSTREAM_RETURN_IF_ERROR(CheckKeys(
-        f,
-        {"chunk_triangles", "first_chunk_triangles", "coarse_triangles", "max_queued_chunks",
-         "retain_mb"},
-        "frames."));
+    ISOSTREAM_RETURN_IF_ERROR(CheckKeys(f,
+                                        {"chunk_triangles", "first_chunk_triangles",
+                                         "coarse_triangles", "max_queued_chunks", "retain_mb"},
+                                        "frames."));
     ISOSTREAM_RETURN_IF_ERROR(Get(f, "chunk_triangles", "frames.", &c->chunk_triangles));
     ISOSTREAM_RETURN_IF_ERROR(
         Get(f, "first_chunk_triangles", "frames.", &c->first_chunk_triangles));
@@ -91,8 +104,22 @@ absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
   if (!in) return absl::NotFoundError("cannot open config file '" + path + "'");
   std::stringstream text;
   text << in.rdbuf();
-  const json j = json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
+  // A key given twice in one object would silently keep its last value: refused, named.
+  std::vector<std::set<std::string>> open_objects;
+  std::string repeated;
+  const json::parser_callback_t note_keys = [&](int /*depth*/, json::parse_event_t event,
+                                                json& parsed) {
+    if (event == json::parse_event_t::object_start) open_objects.emplace_back();
+    if (event == json::parse_event_t::object_end && !open_objects.empty()) open_objects.pop_back();
+    if (event == json::parse_event_t::key && !open_objects.empty() && repeated.empty() &&
+        !open_objects.back().insert(parsed.get<std::string>()).second)
+      repeated = parsed.get<std::string>();
+    return true;
+  };
+  const json j = json::parse(text.str(), note_keys, /*allow_exceptions=*/false);
   if (j.is_discarded()) return absl::InvalidArgumentError("'" + path + "' is not valid JSON");
+  if (!repeated.empty())
+    return absl::InvalidArgumentError(path + ": key '" + repeated + "' is given twice");
   const absl::Status s = Parse(j, config);
   if (!s.ok()) return absl::InvalidArgumentError(path + ": " + std::string(s.message()));
   return absl::OkStatus();
@@ -126,6 +153,20 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
     return bad("retain_mb must be in 0 (off)..1073741824");
   for (const auto& [name, spec] : c.volumes)
     if (name.empty() || spec.empty()) return bad("catalogue names and specs must not be empty");
+  if (c.shutdown_grace_ms < 0 || c.shutdown_grace_ms > 3'600'000)
+    return bad("shutdown_grace_ms must be in 0..3600000");
+  static const std::set<std::string> kLevels = {"trace", "debug",    "info", "warn",
+                                                "error", "critical", "off"};
+  if (!kLevels.count(c.log_level))
+    return bad("log_level must be one of trace, debug, info, warn, error, critical, off; got '" +
+               c.log_level + "'");
+  // HOST:PORT with a port in 0..65535 (gRPC takes a larger one modulo 65536, and a missing
+  // one as 443).
+  const size_t colon = c.listen.rfind(':');
+  const std::string port = colon == std::string::npos ? "" : c.listen.substr(colon + 1);
+  if (colon == 0 || port.empty() || port.size() > 5 ||
+      port.find_first_not_of("0123456789") != std::string::npos || std::stoi(port) > 65535)
+    return bad("listen must be HOST:PORT with a port in 0..65535; got '" + c.listen + "'");
   return absl::OkStatus();
 }
 

@@ -187,8 +187,7 @@ void ServiceCore::StartPreload() {
       if (catalogue.Get(name).ok()) ++prepared;  // failures are logged by the catalogue
     }
     spdlog::info("preloaded {} of {} catalogue volumes in {:.1f} s", prepared,
-                 config.volumes.size(),
-                 std::chrono::duration<double>(Clock::now() - t0).count());
+                 config.volumes.size(), std::chrono::duration<double>(Clock::now() - t0).count());
   });
 }
 
@@ -341,14 +340,13 @@ class ChunkStream : public Reactor, public StreamBase {
         spdlog::info("{}: the client took no data for {} ms, ending the stream", peer_,
                      stall.count());
         core_->counters.streams_stalled.fetch_add(1);
-        FailLocked(grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
-                                "the client read nothing for " + std::to_string(stall.count()) +
-                                    " ms"));
+        FailLocked(
+            grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                         "the client read nothing for " + std::to_string(stall.count()) + " ms"));
         cancelling_ = true;  // no Finish (so no OnDone: context_ stays valid) until TryCancel
         cancel_call = true;
       } else if (idle.count() > 0 && idle_timeout_applies_ && !finishing_ && !job_running_ &&
-                 !pending_ && queue_.empty() && !write_in_flight_ &&
-                 now - last_activity_ >= idle) {
+                 !pending_ && queue_.empty() && !write_in_flight_ && now - last_activity_ >= idle) {
         const auto seconds = std::chrono::duration_cast<std::chrono::seconds>(idle).count();
         spdlog::info("{}: session idle for {} s, closing it", peer_, seconds);
         core_->counters.sessions_idle_closed.fetch_add(1);
@@ -537,8 +535,8 @@ class ChunkStream : public Reactor, public StreamBase {
   const std::string peer_;
   std::shared_ptr<StreamBase> self_;
   bool admitted_ = false;  // holds a session slot (set before any other thread sees the stream)
-  bool idle_timeout_applies_ = false;  // Session streams, once admitted; under mu_
-  CoarseHint coarse_hint_;             // used by the one running job only
+  bool idle_timeout_applies_ = false;              // Session streams, once admitted; under mu_
+  CoarseHint coarse_hint_;                         // used by the one running job only
   RetainedFrame retained_{&core_->retain_budget};  // likewise
 
   mutable std::mutex mu_;
@@ -727,9 +725,8 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
     info.set_min_value(v.min_value);
     info.set_max_value(v.max_value);
     info.set_position_error((*served)->position_error);
-    const auto counts = (*served)->histograms.Get(v, h, bins, [context] {
-      return context->IsCancelled();
-    });
+    const auto counts =
+        (*served)->histograms.Get(v, h, bins, [context] { return context->IsCancelled(); });
     if (!counts) return finish(gone);
     for (uint64_t c : *counts) info.add_histogram(c);
     finish(grpc::Status::OK);

@@ -20,8 +20,8 @@ class GuardedDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
     StartSuiteDaemon([](const std::string& dir) {
-      return std::vector<std::string>{"--cache-dir", dir + "/cache", "--threads", "2", "--token",
-                                      "s3cret", "--max-triangles", "100000"};
+      return std::vector<std::string>{"--cache-dir", dir + "/cache", "--threads",       "2",
+                                      "--token",     "s3cret",       "--max-triangles", "100000"};
     });
   }
 };
@@ -143,7 +143,8 @@ std::string DaemonLog(const ScratchDir& scratch) {
 TEST_F(ConfiguredDaemon, PreparesItsCatalogueAtStart) {
   bool preloaded = false;
   for (int i = 0; i < 400 && !preloaded; ++i) {
-    preloaded = DaemonLog(*scratch_).find("preloaded 2 of 2 catalogue volumes") != std::string::npos;
+    preloaded =
+        DaemonLog(*scratch_).find("preloaded 2 of 2 catalogue volumes") != std::string::npos;
     if (!preloaded) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   EXPECT_TRUE(preloaded) << DaemonLog(*scratch_);
@@ -238,8 +239,8 @@ class IdleDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
     StartSuiteDaemon([](const std::string& dir) {
-      return std::vector<std::string>{"--idle-timeout-s", "1", "--threads", "2", "--cache-dir",
-                                      dir + "/cache"};
+      return std::vector<std::string>{"--idle-timeout-s", "1",           "--threads", "2",
+                                      "--cache-dir",      dir + "/cache"};
     });
   }
 
@@ -394,8 +395,8 @@ class StalledClientDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
     StartSuiteDaemon([](const std::string& dir) {
-      return std::vector<std::string>{"--max-sessions", "1", "--deadline-ms", "2000",
-                                      "--idle-timeout-s", "0", "--cache-dir", dir + "/cache"};
+      return std::vector<std::string>{"--max-sessions",   "1", "--deadline-ms", "2000",
+                                      "--idle-timeout-s", "0", "--cache-dir",   dir + "/cache"};
     });
   }
 };
@@ -442,8 +443,8 @@ class CrowdedDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
     StartSuiteDaemon([](const std::string& dir) {
-      return std::vector<std::string>{"--cache-dir", dir + "/cache", "--retain-mb", "64",
-                                      "--threads", "2"};
+      return std::vector<std::string>{"--cache-dir", dir + "/cache", "--retain-mb",
+                                      "64",          "--threads",    "2"};
     });
   }
 };

@@ -69,6 +69,35 @@ TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
   EXPECT_TRUE(ValidateConfig(DaemonConfig()).ok());
 }
 
+// Values that would be cut, wrapped or ignored are refused, naming what is wrong.
+TEST(Config, RefusesValuesItCouldOnlyMisread) {
+  auto message = [](const std::string& text) {
+    DaemonConfig c;
+    const absl::Status s = LoadText(text, &c);
+    return std::string(s.ok() ? ValidateConfig(c).message() : s.message());
+  };
+  EXPECT_NE(message(R"({"limits": {"max_triangles": 1e20}})").find("whole number"),
+            std::string::npos);
+  EXPECT_NE(message(R"({"limits": {"max_sessions": 2.5}})").find("max_sessions"),
+            std::string::npos);
+  EXPECT_NE(message(R"({"threads": 99999999999})").find("threads"), std::string::npos);
+  EXPECT_NE(message(R"({"threads": 1, "threads": 2})").find("'threads' is given twice"),
+            std::string::npos);
+  EXPECT_NE(message(R"({"volumes": {"a": "sphere:9", "a": "cayley:9"}})").find("'a'"),
+            std::string::npos);
+  EXPECT_EQ(message(R"({"volumes": {"a": "sphere:9"}, "limits": {"max_sessions": 2}})"), "");
+  EXPECT_NE(message(R"({"shutdown_grace_ms": -1})").find("shutdown_grace_ms"), std::string::npos);
+  EXPECT_NE(message(R"({"log_level": "shouty"})").find("log_level"), std::string::npos);
+  EXPECT_EQ(message(R"({"log_level": "warn"})"), "");
+  for (const char* listen : {"127.0.0.1:70000", "127.0.0.1:65536", "127.0.0.1", "127.0.0.1:", ":80",
+                             "127.0.0.1:-1", "127.0.0.1:8o"})
+    EXPECT_NE(message(std::string(R"({"listen": ")") + listen + "\"}").find("listen"),
+              std::string::npos)
+        << listen;
+  for (const char* listen : {"127.0.0.1:0", "0.0.0.0:65535", "[::1]:7878", "localhost:7878"})
+    EXPECT_EQ(message(std::string(R"({"listen": ")") + listen + "\"}"), "") << listen;
+}
+
 // The example deploy/ ships names every key with a valid value.
 TEST(Config, ExampleConfigLoadsAndValidates) {
   DaemonConfig c;
@@ -85,8 +114,12 @@ TEST(Catalogue, GeneratorNamesOnlyWithinTheLimit) {
   VolumeCatalogue generators(o);
   EXPECT_TRUE(generators.Check("buckyball:65").ok());
   EXPECT_TRUE(generators.Check("noise:33:7").ok());
+  // Seeds cover [0, 2^32), as the CLI's generators take them.
+  EXPECT_TRUE(generators.Check("noise:33:2147483648").ok());
+  EXPECT_TRUE(generators.Check("noise:33:4294967295").ok());
   for (const char* bad : {"buckyball:66", "buckyball:1", "buckyball", "buckyball:6x", "sphere:9:1",
-                          "/etc/passwd", "x.vdb", "raw:/a:2x2x2:f32", "noise:9:"})
+                          "/etc/passwd", "x.vdb", "raw:/a:2x2x2:f32",
+                          "noise:9:", "noise:9:4294967296", "noise:9:99999999999", "noise:9:-1"})
     EXPECT_EQ(generators.Check(bad).code(), absl::StatusCode::kNotFound) << bad;
   o.volumes = {{"head", "/data/head.nii.gz"}};
   VolumeCatalogue named(o);
@@ -370,7 +403,7 @@ TEST_F(RetainedFrameTest, SlidingThroughMeshesRecordsNothing) {
   EXPECT_TRUE(draw(0.004));  // a session's first mesh
   EXPECT_TRUE(draw(0.005));  // one change: a new mesh to look around
   EXPECT_NE(frame.Find(v, r), nullptr);
-  EXPECT_FALSE(draw(0.006));  // sliding
+  EXPECT_FALSE(draw(0.006));    // sliding
   EXPECT_EQ(budget.used(), 0);  // the last recorded mesh was freed
   EXPECT_FALSE(draw(0.007));
   EXPECT_TRUE(draw(0.007));  // the same mesh again: recorded, the next view is re-ordered

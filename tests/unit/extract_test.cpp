@@ -472,6 +472,10 @@ TEST(Extract, BadRequestsGiveClearErrors) {
   r.isovalues = {std::nanf("")};
   EXPECT_EQ(code(r).code(), absl::StatusCode::kInvalidArgument);
   r = ok;
+  r.isovalues = {0.5f, 0.25f, 0.5f};
+  EXPECT_EQ(code(r).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(code(r).message().find("twice"), std::string::npos);
+  r = ok;
   r.view.orthographic = true;
   r.view.direction = {0, 0, 0};
   EXPECT_EQ(code(r).code(), absl::StatusCode::kInvalidArgument);
