@@ -16,7 +16,8 @@ absl::StatusOr<std::string> ReadTlsCa(const std::string& path) {
   if (!pem.ok())
     return absl::InvalidArgumentError("cannot read --tls-ca '" + path +
                                       "': " + std::string(pem.status().message()));
-  if (pem->empty()) return absl::InvalidArgumentError("--tls-ca '" + path + "' holds no certificates");
+  if (pem->empty())
+    return absl::InvalidArgumentError("--tls-ca '" + path + "' holds no certificates");
   return std::move(*pem);
 }
 
@@ -66,9 +67,9 @@ absl::Status FrameAssembler::Add(const pb::FrameChunk& chunk) {
                              ReadChunkHeader(chunk.data().data(), chunk.data().size()));
   if (int64_t(frame_.mesh.triangle_count()) + int64_t(header.triangle_count) > max_triangles_ ||
       int64_t(frame_.mesh.vertex_count()) + int64_t(header.vertex_count) > 3 * max_triangles_)
-    return absl::ResourceExhaustedError(
-        "frame " + std::to_string(frame_.id) + " grows past " + std::to_string(max_triangles_) +
-        " triangles, this client's limit per frame");
+    return absl::ResourceExhaustedError("frame " + std::to_string(frame_.id) + " grows past " +
+                                        std::to_string(max_triangles_) +
+                                        " triangles, this client's limit per frame");
   const size_t before = frame_.mesh.triangle_count();
   ISOSTREAM_RETURN_IF_ERROR(DecodeAnyChunk(chunk.data().data(), chunk.data().size(), &frame_.mesh));
   if (frame_.mesh.triangle_count() - before != chunk.triangle_count())
@@ -148,14 +149,17 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& opt
   for (unsigned char ch : options.token)
     if (ch < 0x20 || ch > 0x7e)
       return absl::InvalidArgumentError("the token must be printable ASCII characters");
-  // A port past 65535 would be taken modulo 65536 (:104903 reached :39367).
+  if (options.address.empty()) return absl::InvalidArgumentError("no server address given");
+  // A port past 65535 would be taken modulo 65536 (:104903 reached :39367), a negative one as
+  // its 16 low bits (:-1 reached :65535).
   const size_t colon = options.address.rfind(':');
   if (colon != std::string::npos && colon + 1 < options.address.size()) {
     const std::string port = options.address.substr(colon + 1);
-    if (port.find_first_not_of("0123456789") == std::string::npos &&
-        (port.size() > 5 || std::stoi(port) > 65535))
+    const std::string digits = port[0] == '-' ? port.substr(1) : port;
+    if (!digits.empty() && digits.find_first_not_of("0123456789") == std::string::npos &&
+        (port[0] == '-' || port.size() > 5 || std::stoi(port) > 65535))
       return absl::InvalidArgumentError("port " + port + " of " + options.address +
-                                        " is past 65535");
+                                        " is not in 0..65535");
   }
   auto c = std::unique_ptr<Client>(new Client());
   c->options_ = options;

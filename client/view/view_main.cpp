@@ -190,6 +190,12 @@ int Run(const Args& args) {
   } else if (args.output.empty()) {
     return Fail(absl::InvalidArgumentError("give -o frame.png (or --window)"));
   }
+  // PNG is all it writes: another extension would name a file holding something else.
+  const std::string& out = args.output;
+  if (!out.empty() && (out.size() < 4 || (out.compare(out.size() - 4, 4, ".png") != 0 &&
+                                          out.compare(out.size() - 4, 4, ".PNG") != 0)))
+    return Fail(
+        absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" + out + "'"));
   int width = 0, height = 0;
   const absl::Status size_ok = ParseImageSize(args.size, "--size", 16384, &width, &height);
   if (!size_ok.ok()) return Fail(size_ok);
@@ -261,6 +267,11 @@ int Run(const Args& args) {
                                : 90.0f;
     camera.near_plane = std::max(1e-3f * distance, distance - 1.1f * radius);
     camera.far_plane = distance + 1.1f * radius;
+    // Refused before any frame is fetched: an eye so far that single precision cannot tell
+    // near from far (1e30, say) has no projection to draw with.
+    if (!render::IsValidCamera(camera))
+      return Fail(absl::InvalidArgumentError(
+          "--eye " + args.eye + " is too far from the volume (or too close to it) to draw from"));
   }
 
   ViewState state;
@@ -364,13 +375,20 @@ int main(int argc, char** argv) {
   app.add_flag("--window", args.window,
                "interactive window (needs a display): drag to orbit, wheel to zoom, +/- eps, "
                "[ ] isovalues, R reset, Q quit");
-  app.add_option("--exit-after", args.exit_after_frames,
-                 "with --window: close after N refined frames, writing -o as a screenshot");
+  auto* exit_after =
+      app.add_option("--exit-after", args.exit_after_frames,
+                     "with --window: close after N refined frames, writing -o as a screenshot");
   app.add_option("--timeout-s", args.timeout_s,
                  "headless: fail after this many seconds without data from the server (default "
                  "60; 0: wait forever)")
       ->check(CLI::Range(0, 86400));
   CLI11_PARSE(app, argc, argv);
+  if (*exit_after && !args.window) {
+    std::fprintf(stderr,
+                 "isostream-view: --exit-after closes a --window; headless runs end "
+                 "after their frames anyway\n");
+    return 2;
+  }
   // Given values are checked here (NaN and -1 also mean "not given" inside Run).
   if (*eps && !(args.eps >= 0 && std::isfinite(args.eps))) {
     std::fprintf(stderr, "isostream-view: --eps must be a finite number >= 0\n");

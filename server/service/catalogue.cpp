@@ -127,6 +127,10 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
       served->prepared.volume->dims[2], CacheOutcomeName(served->prepared.cache),
       1e3 * (served->prepared.load_s + served->prepared.pad_s + served->prepared.hierarchy_s),
       served->position_bits);
+  // A cache the daemon cannot write to rebuilds every hierarchy at every start: say so.
+  const std::string& note = served->prepared.cache_note;
+  if (note.find("not stored") != std::string::npos)
+    spdlog::warn("volume '{}': hierarchy cache: {}", name, note);
   entry->served = served;
   prepared_.fetch_add(1);
   ReturnFreedMemory();  // what preparing freed (the volume's grid above all) is not reused

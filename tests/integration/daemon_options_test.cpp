@@ -46,9 +46,12 @@ TEST_F(GuardedDaemon, TokenIsRequired) {
     o.token = bad;
     EXPECT_EQ(net::Client::Connect(o).status().code(), absl::StatusCode::kInvalidArgument) << bad;
   }
-  net::ClientOptions far;
-  far.address = "127.0.0.1:104903";  // would wrap to port 39367
-  EXPECT_EQ(net::Client::Connect(far).status().code(), absl::StatusCode::kInvalidArgument);
+  for (const char* address : {"127.0.0.1:104903", "127.0.0.1:-1", ""}) {  // 39367, 65535, none
+    net::ClientOptions bad_address;
+    bad_address.address = address;
+    EXPECT_EQ(net::Client::Connect(bad_address).status().code(), absl::StatusCode::kInvalidArgument)
+        << address;
+  }
 }
 
 TEST_F(GuardedDaemon, FrameOverTriangleLimitIsResourceExhausted) {

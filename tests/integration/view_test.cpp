@@ -170,7 +170,8 @@ TEST(View, WindowReopensASessionTheDaemonClosedAsIdle) {
   const std::string png = dir.path() + "/window.png";
   const std::string view = std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
                            " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01"
-                           " --eye 2.2,1.6,2.8 --size 240x200 --window --exit-after 2 -o " + png;
+                           " --eye 2.2,1.6,2.8 --size 240x200 --window --exit-after 2 -o " +
+                           png;
   const std::string cmd = "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' sh -c '" + view +
                           " & pid=$!; sleep 3; xdotool search --sync --name isostream-view"
                           " windowfocus --sync key r; wait $pid'";
@@ -247,6 +248,36 @@ TEST(View, MisbehavingServersGiveClearErrors) {
     EXPECT_LT(server.chunks_sent(), testing::MisbehavingServer::kMaxChunks);
   }
   EXPECT_FALSE(std::filesystem::exists(png));
+}
+
+// Arguments it cannot honour are refused before any frame is asked for: an image it would not
+// write as named, a window option without a window, an eye too far away to draw from.
+TEST(View, ArgumentsItCannotHonourAreRefusedBeforeAnyFrame) {
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/isostreamd.log"));
+  const std::string common = "--server " + daemon.address() +
+                             " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 -o " +
+                             dir.path();
+  const ViewRun jpg = View(common + "/frame.jpg");
+  EXPECT_NE(jpg.code, 0);
+  EXPECT_NE(jpg.output.find("give a .png path"), std::string::npos) << jpg.output;
+  const ViewRun exit_after = View(common + "/frame.png --exit-after 2");
+  EXPECT_NE(exit_after.code, 0);
+  EXPECT_NE(exit_after.output.find("--window"), std::string::npos) << exit_after.output;
+  const ViewRun far = View(common + "/frame.png --eye 1e30,0,0");
+  EXPECT_NE(far.code, 0);
+  EXPECT_NE(far.output.find("too far"), std::string::npos) << far.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.path() + "/frame.jpg"));
+  EXPECT_FALSE(std::filesystem::exists(dir.path() + "/frame.png"));
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  auto stats = (*c)->GetServerStats();
+  ASSERT_TRUE(stats.ok());
+  EXPECT_EQ(stats->frames_started(), 0);
+  EXPECT_EQ(daemon.Stop(), 0);
 }
 
 TEST(View, CorruptChunkBytesAreAnErrorNotACrash) {
