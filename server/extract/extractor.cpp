@@ -54,7 +54,7 @@ absl::Status ValidateRequest(const ExtractRequest& r) {
   for (size_t i = 1; i < sorted.size(); ++i)
     if (sorted[i] == sorted[i - 1]) {
       char shown[32];
-      std::snprintf(shown, sizeof(shown), "%.9g", double(sorted[i]));
+      std::snprintf(shown, sizeof(shown), "%g", double(sorted[i]));
       return absl::InvalidArgumentError(std::string("isovalue ") + shown + " is given twice");
     }
   if (r.budget < 0) return absl::InvalidArgumentError("triangle budget must be positive");

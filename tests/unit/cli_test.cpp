@@ -121,6 +121,13 @@ TEST(Cli, InfoPrintsTheTriangleCountByEps) {
   const CliRun bad = Cli("info --volume buckyball:33 --iso 0.05,x --no-cache");
   EXPECT_EQ(bad.code, 2);
   EXPECT_NE(bad.output.find("'x' is not a number"), std::string::npos) << bad.output;
+  // Checked before the volume is prepared: this one could not be (4097^3 floats).
+  const CliRun early = Cli("info --volume cayley:4097 --iso 0.1,nan --no-cache");
+  EXPECT_EQ(early.code, 2);
+  EXPECT_NE(early.output.find("'nan' is not a number"), std::string::npos) << early.output;
+  const CliRun twice = Cli("info --volume cayley:4097 --iso 0.1,0.1 --no-cache");
+  EXPECT_EQ(twice.code, 2);
+  EXPECT_NE(twice.output.find("isovalue 0.1 is given twice"), std::string::npos) << twice.output;
 }
 
 // Two samples per axis is a valid volume: it pads to the smallest hierarchy, 3^3.
