@@ -94,6 +94,18 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   }
 }
 
+// The daemon's counters (empty, with a test failure, if it cannot be asked).
+::isostream::v1::ServerStats StatsOf(const testing::DaemonProcess& d) {
+  net::ClientOptions o;
+  o.address = d.address();
+  auto c = net::Client::Connect(o);
+  EXPECT_TRUE(c.ok()) << c.status();
+  if (!c.ok()) return {};
+  auto s = (*c)->GetServerStats();
+  EXPECT_TRUE(s.ok()) << s.status();
+  return s.ok() ? *s : ::isostream::v1::ServerStats();
+}
+
 // An orbit around one mesh: from its second view the daemon re-orders its last frame instead of
 // extracting (FrameStats.reordered); the pictures are pixel for pixel those of a daemon that
 // retains nothing and extracts every view.
@@ -121,17 +133,8 @@ TEST(View, ReorderedOrbitDrawsWhatExtractionDraws) {
     EXPECT_EQ(differing, 0u);
   }
   // The retaining daemon did re-order (views 2 to 4); the other never did.
-  auto stats = [](const testing::DaemonProcess& d) {
-    net::ClientOptions o;
-    o.address = d.address();
-    auto c = net::Client::Connect(o);
-    EXPECT_TRUE(c.ok());
-    auto s = (*c)->GetServerStats();
-    EXPECT_TRUE(s.ok());
-    return s.ok() ? *s : ::isostream::v1::ServerStats();
-  };
-  EXPECT_EQ(stats(retaining).frames_reordered(), 3);
-  EXPECT_EQ(stats(extracting).frames_reordered(), 0);
+  EXPECT_EQ(StatsOf(retaining).frames_reordered(), 3);
+  EXPECT_EQ(StatsOf(extracting).frames_reordered(), 0);
   EXPECT_EQ(retaining.Stop(), 0);
   EXPECT_EQ(extracting.Stop(), 0);
 }
@@ -270,13 +273,7 @@ TEST(View, ArgumentsItCannotHonourAreRefusedBeforeAnyFrame) {
   EXPECT_NE(far.output.find("too far"), std::string::npos) << far.output;
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/frame.jpg"));
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/frame.png"));
-  net::ClientOptions o;
-  o.address = daemon.address();
-  auto c = net::Client::Connect(o);
-  ASSERT_TRUE(c.ok());
-  auto stats = (*c)->GetServerStats();
-  ASSERT_TRUE(stats.ok());
-  EXPECT_EQ(stats->frames_started(), 0);
+  EXPECT_EQ(StatsOf(daemon).frames_started(), 0);
   EXPECT_EQ(daemon.Stop(), 0);
 }
 

@@ -234,11 +234,17 @@ TEST(RetainedCut, ServesOnlyTheSameMesh) {
   EXPECT_FALSE(cut.Serves(r));
 }
 
-TEST(RetainedCut, BadViewsAndStoppedExtractionsGiveClearErrors) {
-  const auto h = testing::MakeHierarchy(4, SphereField);
+// One surface of a small sphere, seen from outside.
+ExtractRequest SphereRequest() {
   ExtractRequest r;
   r.isovalues = {0.5f};
   r.view = Perspective({40, 40, 40});
+  return r;
+}
+
+TEST(RetainedCut, BadViewsAndStoppedExtractionsGiveClearErrors) {
+  const auto h = testing::MakeHierarchy(4, SphereField);
+  const ExtractRequest r = SphereRequest();
   RetainedCut cut;
   auto none = Reorder(cut, r.view);
   EXPECT_EQ(none.status().code(), absl::StatusCode::kFailedPrecondition);
@@ -265,9 +271,7 @@ TEST(RetainedCut, BadViewsAndStoppedExtractionsGiveClearErrors) {
 // frame back, or when it hands another, re-ordering is refused.
 TEST(RetainedCut, ServesOnlyOnceItKeepsTheFrameItRecorded) {
   const auto h = testing::MakeHierarchy(4, SphereField);
-  ExtractRequest r;
-  r.isovalues = {0.5f};
-  r.view = Perspective({40, 40, 40});
+  const ExtractRequest r = SphereRequest();
   RetainedCut cut;
   auto first = Extract(*h, GridToWorld{}, r, nullptr, &cut);
   ASSERT_TRUE(first.ok());
