@@ -47,6 +47,23 @@ struct ExtractRequest {
   BudgetMemo* budget_memo = nullptr;
 };
 
+// What names a request's mesh on a given volume, whatever its view and order: the isovalues in
+// request order (which numbers the surfaces), the normal mode, and eps, or the budget for a
+// budget request. A retained cut is matched by it, and a daemon stream's last frame.
+struct MeshName {
+  std::vector<float> isovalues;
+  NormalMode normals = NormalMode::kSmooth;
+  double eps = 0;  // 0 for a budget request
+  int64_t budget = 0;
+
+  static MeshName Of(const ExtractRequest& r) {
+    return {r.isovalues, r.normals, r.budget > 0 ? 0.0 : r.eps, r.budget};
+  }
+  bool operator==(const MeshName& o) const {
+    return isovalues == o.isovalues && normals == o.normals && eps == o.eps && budget == o.budget;
+  }
+};
+
 struct ExtractStats {
   double eps_used = 0.0;
   int64_t triangles = 0;
@@ -55,9 +72,9 @@ struct ExtractStats {
   // Tetrahedra decided by the emitting traversal; a block enters only subtrees holding a
   // crossing finest tetrahedron, so blocks decide fewer than node-by-node refinement.
   int64_t tets_visited = 0;
-  int64_t leaves = 0;     // leaf tetrahedra that produced triangles
-  int subtrees = 0;       // units of parallel work
-  int budget_passes = 0;  // count-only traversals run to find eps for a budget
+  int64_t leaves = 0;      // leaf tetrahedra that produced triangles
+  int subtrees = 0;        // units of parallel work
+  int budget_passes = 0;   // count-only traversals run to find eps for a budget
   bool reordered = false;  // drawn from a retained cut (retained_cut.h), not extracted
   double budget_ms = 0, split_ms = 0, extract_ms = 0, join_ms = 0, total_ms = 0;
 };

@@ -508,10 +508,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   if (retain && recording) {
     RetainedCut& cut = *retain;
     top.Record(&cut.top_, cut.root_begin_.data(), cut.root_end_.data());
-    cut.isovalues_ = r.isovalues;
+    cut.name_ = MeshName::Of(r);
     cut.eps_ = eps;
-    cut.budget_ = r.budget;
-    cut.normal_mode_ = r.normals;
     cut.k_ = h.k();
     cut.xf_ = xf;
     cut.iso_count_ = c.iso_count;

@@ -16,14 +16,16 @@ using extract_internal::MultiLeaf;
 
 bool RetainedCut::Serves(const ExtractRequest& r, double budget_eps) const {
   if (empty()) return false;
-  if (r.isovalues != isovalues_ || r.normals != normal_mode_) return false;
-  if (r.budget > 0) return r.budget == budget_ || (budget_eps >= 0 && budget_eps == eps_);
-  return budget_ == 0 && r.eps == eps_;
+  const MeshName asked = MeshName::Of(r);
+  if (asked == name_) return true;
+  // A budget whose remembered eps is the one this cut was drawn at asks for the same mesh.
+  return r.budget > 0 && budget_eps >= 0 && budget_eps == eps_ &&
+         asked.isovalues == name_.isovalues && asked.normals == name_.normals;
 }
 
 bool RetainedCut::KeepMesh(OrderedMesh&& frame) {
   const bool recorded = pending_triangles_ == frame.triangle_count() &&
-                        pending_vertices_ == frame.vertex_count() && !isovalues_.empty();
+                        pending_vertices_ == frame.vertex_count() && !name_.isovalues.empty();
   if (!recorded) {
     Clear();
     return false;
@@ -34,10 +36,9 @@ bool RetainedCut::KeepMesh(OrderedMesh&& frame) {
 }
 
 void RetainedCut::Clear() {
-  isovalues_.clear();
+  name_ = MeshName();
   pending_triangles_ = kNoneRecorded;
   eps_ = 0;
-  budget_ = 0;
   iso_count_ = 0;
   mesh_ = OrderedMesh();  // the next frame's mesh is moved in, not copied into these
   top_.clear();
@@ -186,7 +187,7 @@ absl::StatusOr<ExtractResult> Reorder(const RetainedCut& cut, const View& view, 
   const auto t_start = std::chrono::steady_clock::now();
   if (cut.empty()) return absl::FailedPreconditionError("no frame retained");
   ExtractRequest check;
-  check.isovalues = cut.isovalues_;
+  check.isovalues = cut.name_.isovalues;
   check.eps = cut.eps_;
   check.view = view;
   check.order = order;

@@ -32,7 +32,7 @@ class RetainedCut {
   size_t triangle_count() const { return mesh_.triangle_count(); }
   size_t memory_bytes() const;
   // True until a recorded frame has its mesh kept (KeepMesh).
-  bool empty() const { return isovalues_.empty() || pending_triangles_ != kNoneRecorded; }
+  bool empty() const { return name_.isovalues.empty() || pending_triangles_ != kNoneRecorded; }
   // Extract records the frame's tree but leaves its triangles with the caller, who streams
   // them meanwhile: the cut serves other views once the caller hands that frame back here,
   // unchanged (moved, not copied: a copy cost ~25 MB of memory traffic per 1 M triangles).
@@ -59,11 +59,9 @@ class RetainedCut {
   friend absl::StatusOr<ExtractResult> Reorder(const RetainedCut&, const View&, DrawOrder,
                                                const ExtractObserver*);
 
-  // What the mesh was extracted with.
-  std::vector<float> isovalues_;
+  // What the mesh was extracted for, and at.
+  MeshName name_;
   double eps_ = 0;
-  int64_t budget_ = 0;
-  NormalMode normal_mode_ = NormalMode::kSmooth;
   int k_ = 0;
   GridToWorld xf_;
   float iso_[kMaxSurfaces] = {};  // sorted, as the traversal's Context holds them

@@ -178,25 +178,18 @@ class RetainedFrame {
   }
 
  private:
-  // What identifies a frame's mesh, whatever its view.
+  // What identifies a frame's mesh, whatever its view: the volume as prepared, and the
+  // request's MeshName.
   struct MeshKey {
     MeshKey() = default;
     MeshKey(const ServedVolume& volume, const ExtractRequest& r)
-        : hierarchy(volume.prepared.hierarchy.get()),
-          isovalues(r.isovalues),
-          eps(r.budget > 0 ? 0.0 : r.eps),
-          budget(r.budget),
-          normals(r.normals) {}
+        : hierarchy(volume.prepared.hierarchy.get()), name(MeshName::Of(r)) {}
     bool Same(const ServedVolume& volume, const ExtractRequest& r) const {
-      const MeshKey k(volume, r);
-      return hierarchy != nullptr && k.hierarchy == hierarchy && k.isovalues == isovalues &&
-             k.eps == eps && k.budget == budget && k.normals == normals;
+      return hierarchy != nullptr && volume.prepared.hierarchy.get() == hierarchy &&
+             MeshName::Of(r) == name;
     }
     const Hierarchy* hierarchy = nullptr;  // compared only, never read
-    std::vector<float> isovalues;
-    double eps = 0;
-    int64_t budget = 0;
-    NormalMode normals = NormalMode::kSmooth;
+    MeshName name;
   };
 
   // The recording's tree grew by `bytes` (called by the extraction's workers, as each subtree's
