@@ -357,8 +357,12 @@ int main(int argc, char** argv) {
   app.add_option("--server", args.server, "daemon address (default 127.0.0.1:7878)");
   app.add_option("--volume", args.volume, "catalogue name, e.g. buckyball:129")->required();
   app.add_option("--iso", args.iso, "isovalues, comma separated (default: 20/40/60% of the range)");
-  auto* eps = app.add_option("--eps", args.eps, "error bound in data units");
-  auto* budget = app.add_option("--budget", args.budget, "triangle budget");
+  // CLI11 reads an empty number as 0: `--eps ""` would silently ask for full resolution.
+  const CLI::Validator given_number(
+      [](std::string& text) { return text.empty() ? std::string("a number is needed") : ""; },
+      "NUMBER");
+  auto* eps = app.add_option("--eps", args.eps, "error bound in data units")->check(given_number);
+  auto* budget = app.add_option("--budget", args.budget, "triangle budget")->check(given_number);
   eps->excludes(budget);
   app.add_option("--eye", args.eye, "perspective eye x,y,z (default: framing the volume)");
   app.add_option("--size", args.size, "image size WxH (default 800x800)");

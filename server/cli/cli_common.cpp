@@ -49,9 +49,15 @@ absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args) {
 
 void AddViewOptions(CLI::App* cmd, ViewArgs* args) {
   cmd->add_option("--iso", args->iso, "isovalues, comma separated (at most 16)")->required();
-  auto* eps = cmd->add_option("--eps", args->eps, "error bound in data units (0: full resolution)");
+  // CLI11 reads an empty number as 0: `--eps ""` would silently ask for full resolution.
+  const CLI::Validator given_number(
+      [](std::string& text) { return text.empty() ? std::string("a number is needed") : ""; },
+      "NUMBER");
+  auto* eps = cmd->add_option("--eps", args->eps, "error bound in data units (0: full resolution)")
+                  ->check(given_number);
   auto* budget =
-      cmd->add_option("--budget", args->budget, "triangle budget: find the smallest eps that fits");
+      cmd->add_option("--budget", args->budget, "triangle budget: find the smallest eps that fits")
+          ->check(given_number);
   eps->excludes(budget);
   auto* eye = cmd->add_option("--eye", args->eye, "perspective eye x,y,z (world units)");
   auto* dir = cmd->add_option("--view-dir", args->view_dir, "orthographic view direction x,y,z");

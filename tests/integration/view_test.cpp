@@ -265,6 +265,9 @@ TEST(View, ArgumentsItCannotHonourAreRefusedBeforeAnyFrame) {
   const ViewRun jpg = View(common + "/frame.jpg");
   EXPECT_NE(jpg.code, 0);
   EXPECT_NE(jpg.output.find("give a .png path"), std::string::npos) << jpg.output;
+  const ViewRun empty_eps = View(common + "/frame.png --eps ''");
+  EXPECT_NE(empty_eps.code, 0);
+  EXPECT_NE(empty_eps.output.find("a number is needed"), std::string::npos) << empty_eps.output;
   const ViewRun exit_after = View(common + "/frame.png --exit-after 2");
   EXPECT_NE(exit_after.code, 0);
   EXPECT_NE(exit_after.output.find("--window"), std::string::npos) << exit_after.output;

@@ -72,11 +72,14 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
       {"extract --volume sphere:17 --iso 0.5 --budget -1 -o " + out, "positive triangle count"},
       {"extract --volume sphere:17 --iso 0.5 --eps 0 --eye '' -o " + out, "--eye"},
       {"extract --volume sphere:17 --iso 0.5 --eps 0 --view-dir '' -o " + out, "--view-dir"},
+      {"extract --volume sphere:17 --iso 0.5 --eps '' -o " + out, "--eps: a number is needed"},
+      {"extract --volume sphere:17 --iso 0.5 --budget '' -o " + out, "--budget: a number"},
       {"extract --volume sphere:17 --iso 1e300 --eps 0 -o " + out, "single-precision range"},
       {"info --volume raw:/dev/null:4x4x4:float32:xx", "byte order 'xx'"},
       {"info --volume sphere:17 --iso 0.5,1e300", "single-precision range"},
       {"fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 "
-       "--max-frame-triangles 0 -o " + out,
+       "--max-frame-triangles 0 -o " +
+           out,
        "--max-frame-triangles"},
 
   };
@@ -88,10 +91,13 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
   // An empty CA file would have meant plaintext: refused before connecting, as is a device.
   const std::string empty_ca = TempPath("cli-empty-ca.pem");
   ASSERT_TRUE(WriteFileBytes(empty_ca, "").ok());
-  for (const auto& [ca, message] : {std::pair<std::string, std::string>{empty_ca, "holds no certificates"},
-                                    {"/dev/null", "not a regular file"}}) {
-    const CliRun r = Cli("fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 "
-                         "--tls-ca " + ca + " -o " + out);
+  for (const auto& [ca, message] :
+       {std::pair<std::string, std::string>{empty_ca, "holds no certificates"},
+        {"/dev/null", "not a regular file"}}) {
+    const CliRun r =
+        Cli("fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 "
+            "--tls-ca " +
+            ca + " -o " + out);
     EXPECT_EQ(r.code, 2) << ca;
     EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
   }
@@ -114,7 +120,8 @@ TEST(Cli, InfoPrintsTheTriangleCountByEps) {
     EXPECT_GE(counts[i].second, counts[i - 1].second) << counts[i].first;
   EXPECT_EQ(counts.back().first, "0");
   const std::string out = TempPath("cli-info-full.ply");
-  ASSERT_EQ(Cli("extract --volume buckyball:33 --iso 0.05,0.15 --eps 0 --no-cache -o " + out).code, 0);
+  ASSERT_EQ(Cli("extract --volume buckyball:33 --iso 0.05,0.15 --eps 0 --no-cache -o " + out).code,
+            0);
   auto ply = ReadPly(out);
   ASSERT_TRUE(ply.ok()) << ply.status();
   EXPECT_EQ(counts.back().second, (long long)ply->triangle_count());
