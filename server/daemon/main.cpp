@@ -162,7 +162,8 @@ int main(int argc, char** argv) {
   auto* o_retain = app.add_option("--retain-mb", retain_mb,
                                   "memory for streams' last frames, re-ordered for new views of "
                                   "the same mesh instead of extracted (default 1024; 0: off)");
-  auto* o_log = app.add_option("--log-level", log_level, "trace|debug|info|warn|error");
+  auto* o_log =
+      app.add_option("--log-level", log_level, "trace|debug|info|warn|error|critical|off");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
