@@ -386,7 +386,11 @@ int main(int argc, char** argv) {
                  "headless: fail after this many seconds without data from the server (default "
                  "60; 0: wait forever)")
       ->check(CLI::Range(0, 86400));
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;  // usage errors exit 2, as argument errors do; --help 0
+  }
   if (*exit_after && !args.window) {
     std::fprintf(stderr,
                  "isostream-view: --exit-after closes a --window; headless runs end "

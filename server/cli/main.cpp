@@ -15,7 +15,9 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // Usage errors exit 2, as the commands' own argument errors do (CLI11's codes are 100+);
+    // --help exits 0.
+    return app.exit(e) == 0 ? 0 : 2;
   } catch (const std::bad_alloc&) {
     // The commands report errors as statuses; these are the last line, so no input ends in
     // std::terminate.

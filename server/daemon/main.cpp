@@ -167,7 +167,7 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return app.exit(e) == 0 ? 0 : 2;  // usage errors exit 2, as config errors do; --help 0
   }
 
   spdlog::set_default_logger(spdlog::stderr_color_mt("isostreamd"));
