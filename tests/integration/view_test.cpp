@@ -262,18 +262,16 @@ TEST(View, ArgumentsItCannotHonourAreRefusedBeforeAnyFrame) {
   const std::string common = "--server " + daemon.address() +
                              " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 -o " +
                              dir.path();
-  const ViewRun jpg = View(common + "/frame.jpg");
-  EXPECT_NE(jpg.code, 0);
-  EXPECT_NE(jpg.output.find("give a .png path"), std::string::npos) << jpg.output;
-  const ViewRun empty_eps = View(common + "/frame.png --eps ''");
-  EXPECT_NE(empty_eps.code, 0);
-  EXPECT_NE(empty_eps.output.find("a number is needed"), std::string::npos) << empty_eps.output;
-  const ViewRun exit_after = View(common + "/frame.png --exit-after 2");
-  EXPECT_NE(exit_after.code, 0);
-  EXPECT_NE(exit_after.output.find("--window"), std::string::npos) << exit_after.output;
-  const ViewRun far = View(common + "/frame.png --eye 1e30,0,0");
-  EXPECT_NE(far.code, 0);
-  EXPECT_NE(far.output.find("too far"), std::string::npos) << far.output;
+  const std::pair<std::string, std::string> refused[] = {
+      {"/frame.jpg", "give a .png path"},
+      {"/frame.png --eps ''", "a number is needed"},
+      {"/frame.png --exit-after 2", "--window"},
+      {"/frame.png --eye 1e30,0,0", "too far"}};
+  for (const auto& [args, reason] : refused) {
+    const ViewRun r = View(common + args);
+    EXPECT_NE(r.code, 0) << args;
+    EXPECT_NE(r.output.find(reason), std::string::npos) << args << "\n" << r.output;
+  }
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/frame.jpg"));
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/frame.png"));
   EXPECT_EQ(StatsOf(daemon).frames_started(), 0);
