@@ -127,12 +127,16 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
     layout.inter = std::isfinite(inter) ? inter : 0.0;
   }
 
-  // Spacing from pixdim (sign belongs to the orientation, not the step); a missing or broken
-  // pixdim means unit spacing rather than a rejected file.
+  // Spacing from pixdim (sign belongs to the orientation, not the step). A pixdim of 0 is
+  // "not set" (some writers leave it so): unit spacing, as other NIfTI readers take it. One that
+  // is not a number, or infinite, is a damaged header: refused rather than guessed.
   std::array<double, 3> spacing;
   for (int i = 0; i < 3; ++i) {
     const double p = std::fabs(h.F32(kPixdimOffset + 4 * (i + 1)));
-    spacing[i] = std::isfinite(p) && p > 0 ? p : 1.0;
+    if (!std::isfinite(p))
+      return absl::InvalidArgumentError(path + ": pixdim[" + std::to_string(i + 1) +
+                                        "] (the voxel spacing) is not a finite number");
+    spacing[i] = p > 0 ? p : 1.0;
   }
   // Origin: the world position of voxel (0,0,0) from sform, else qform, else 0. The orientation
   // (rotation, flips) is not applied: samples stay on an axis-aligned grid.

@@ -511,8 +511,8 @@ TEST(VolumeLoadErrors, TruncatedData) {
   std::vector<unsigned char> bytes = ReadBytes(vdb);
   // OpenVDB itself misses a tail of 1-7 bytes (the last voxels read as garbage).
   // 8 bytes: the magic alone, no grids.
-  for (size_t keep : {size_t{8}, bytes.size() / 2, bytes.size() - 10, bytes.size() - 7,
-                      bytes.size() - 1}) {
+  for (size_t keep :
+       {size_t{8}, bytes.size() / 2, bytes.size() - 10, bytes.size() - 7, bytes.size() - 1}) {
     path = ScratchPath("short_" + std::to_string(keep) + ".vdb");
     WriteBytes(path, std::vector<unsigned char>(bytes.begin(), bytes.begin() + keep));
     ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, path);
@@ -550,6 +550,21 @@ TEST(VolumeLoadNifti, TinyAndHugeSpacing) {
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->spacing, (std::array<double, 3>{double(1e-5f), double(1e-5f), double(2e-5f)}));
   EXPECT_EQ((*v)->origin, (std::array<double, 3>{0.25, -0.5, double(1e-3f)}));
+
+  // Unset (0): unit spacing, as other readers take it. Not a number: a damaged header.
+  nf.pixdim = {0, 2, 0};
+  const std::string unset = ScratchPath("unset.nii");
+  WriteBytes(unset, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  v = LoadVolume(unset);
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->spacing, (std::array<double, 3>{1, 2, 1}));
+  for (float broken : {std::nanf(""), std::numeric_limits<float>::infinity()}) {
+    nf.pixdim = {1, 1, broken};
+    const std::string damaged = ScratchPath("damaged.nii");
+    WriteBytes(damaged, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+    ExpectError(LoadVolume(damaged), absl::StatusCode::kInvalidArgument, "damaged.nii",
+                "pixdim[3] (the voxel spacing) is not a finite number");
+  }
 
   nf.pixdim = {3e38f, 3e38f, 3e38f};
   const std::string huge = ScratchPath("huge.nii");
@@ -705,8 +720,8 @@ TEST(VolumeLoadErrors, NonFiniteSamples) {
   ASSERT_TRUE(fine.ok()) << fine.status();
   EXPECT_EQ((*fine)->min_value, *std::min_element(wide.begin(), wide.end()));
   EXPECT_EQ((*fine)->max_value, *std::max_element(wide.begin(), wide.end()));
-  wide[(4 * 9 + 3) * 17 + 11] = std::numeric_limits<float>::quiet_NaN();   // (11, 3, 4)
-  wide[(8 * 9 + 8) * 17 + 3] = -std::numeric_limits<float>::infinity();    // later
+  wide[(4 * 9 + 3) * 17 + 11] = std::numeric_limits<float>::quiet_NaN();  // (11, 3, 4)
+  wide[(8 * 9 + 8) * 17 + 3] = -std::numeric_limits<float>::infinity();   // later
   wide_bytes.clear();
   for (float v : wide) Put(wide_bytes, v, false);
   WriteBytes(path, wide_bytes);
@@ -779,8 +794,8 @@ TEST(VolumeLoadErrors, MalformedRawSpecs) {
   ExpectError(LoadVolume("raw::2x2x2:uint8"), absl::StatusCode::kInvalidArgument, "raw::2x2x2");
   ASSERT_TRUE(LoadVolume("raw:" + path + ":2x2x2:uint8").ok());  // the file itself is fine
   // A wrong last field after a type is a wrong byte order; with dims before it, a wrong type.
-  ExpectError(LoadVolume("raw:" + path + ":2x2x2:uint8:middle"),
-              absl::StatusCode::kInvalidArgument, "ok.raw", "byte order 'middle' is not le or be");
+  ExpectError(LoadVolume("raw:" + path + ":2x2x2:uint8:middle"), absl::StatusCode::kInvalidArgument,
+              "ok.raw", "byte order 'middle' is not le or be");
   ExpectError(LoadVolume("raw:" + path + ":2x2x2:float"), absl::StatusCode::kInvalidArgument,
               "ok.raw", "unsupported type 'float'");
   ExpectError(LoadVolume("raw:" + path + ":2x2x2:float:be"), absl::StatusCode::kInvalidArgument,
