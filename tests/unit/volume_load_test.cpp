@@ -240,6 +240,14 @@ std::vector<unsigned char> Concat(std::vector<unsigned char> a,
   return a;
 }
 
+// Writes nf's header and samples of `type` to the scratch file `name`, and loads it.
+absl::StatusOr<VolumePtr> WriteAndLoad(const NiftiFile& nf, const std::string& name,
+                                       Type type = Type::kFloat32) {
+  const std::string path = ScratchPath(name);
+  WriteBytes(path, Concat(nf.Header(), Samples(type, nf.dims, false)));
+  return LoadVolume(path);
+}
+
 TEST(VolumeLoadNifti, EveryTypePlainAndGzip) {
   for (const TypeCase& t : kTypeCases) {
     if (t.nifti_code == 0) continue;
@@ -297,9 +305,7 @@ TEST(VolumeLoadNifti, ScalingOffsetOriginAndFourthDim) {
 
   nf.sform_code = 0;  // now the qform offset applies
   nf.qoffset = {1, 2, 3};
-  const std::string qpath = ScratchPath("qform.nii");
-  WriteBytes(qpath, Concat(nf.Header(), Samples(Type::kInt16, nf.dims, false)));
-  v = LoadVolume(qpath);
+  v = WriteAndLoad(nf, "qform.nii", Type::kInt16);
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->origin, (std::array<double, 3>{1, 2, 3}));
 }
@@ -553,16 +559,12 @@ TEST(VolumeLoadNifti, TinyAndHugeSpacing) {
 
   // Unset (0): unit spacing, as other readers take it. Not a number: a damaged header.
   nf.pixdim = {0, 2, 0};
-  const std::string unset = ScratchPath("unset.nii");
-  WriteBytes(unset, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
-  v = LoadVolume(unset);
+  v = WriteAndLoad(nf, "unset.nii");
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->spacing, (std::array<double, 3>{1, 2, 1}));
   for (float broken : {std::nanf(""), std::numeric_limits<float>::infinity()}) {
     nf.pixdim = {1, 1, broken};
-    const std::string damaged = ScratchPath("damaged.nii");
-    WriteBytes(damaged, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
-    ExpectError(LoadVolume(damaged), absl::StatusCode::kInvalidArgument, "damaged.nii",
+    ExpectError(WriteAndLoad(nf, "damaged.nii"), absl::StatusCode::kInvalidArgument, "damaged.nii",
                 "pixdim[3] (the voxel spacing) is not a finite number");
   }
 
