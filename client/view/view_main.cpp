@@ -172,9 +172,11 @@ render::Camera FitToMesh(render::Camera camera, const OrderedMesh& mesh) {
   return camera;
 }
 
+// Exits 2 for a request that cannot be made as given (as usage errors do), 1 for anything that
+// went wrong while making it.
 int Fail(const absl::Status& status) {
   std::fprintf(stderr, "isostream-view: %s\n", std::string(status.message()).c_str());
-  return 1;
+  return status.code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
 }
 
 int Run(const Args& args) {

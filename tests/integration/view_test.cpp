@@ -89,7 +89,7 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
            {"--size 4294967297x1", "--size"},
            {"--token \"$(printf 'a\\tb')\"", "token"}}) {
     const ViewRun r = View("--server 127.0.0.1:1 --volume buckyball:65 -o " + png + " " + args);
-    EXPECT_NE(r.code, 0) << args;
+    EXPECT_EQ(r.code, 2) << args;
     EXPECT_NE(r.output.find(says), std::string::npos) << args << "\n" << r.output;
   }
 }
@@ -269,7 +269,7 @@ TEST(View, ArgumentsItCannotHonourAreRefusedBeforeAnyFrame) {
       {"/frame.png --eye 1e30,0,0", "too far"}};
   for (const auto& [args, reason] : refused) {
     const ViewRun r = View(common + args);
-    EXPECT_NE(r.code, 0) << args;
+    EXPECT_EQ(r.code, 2) << args;
     EXPECT_NE(r.output.find(reason), std::string::npos) << args << "\n" << r.output;
   }
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/frame.jpg"));
