@@ -1,5 +1,6 @@
 #include "shared/number_list.h"
 
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -13,7 +14,13 @@ absl::StatusOr<std::vector<double>> ParseNumberList(std::string_view text, std::
   size_t start = 0;
   while (start <= text.size()) {
     const size_t end = std::min(text.find(',', start), text.size());
-    const std::string item(text.substr(start, end - start));
+    // Spaces around an item are allowed on both sides (strtod alone took them before only).
+    std::string_view field = text.substr(start, end - start);
+    while (!field.empty() && std::isspace(static_cast<unsigned char>(field.front())))
+      field.remove_prefix(1);
+    while (!field.empty() && std::isspace(static_cast<unsigned char>(field.back())))
+      field.remove_suffix(1);
+    const std::string item(field);
     char* stop = nullptr;
     const double v = std::strtod(item.c_str(), &stop);
     if (item.empty() || stop != item.c_str() + item.size() || !std::isfinite(v))

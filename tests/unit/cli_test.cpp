@@ -138,6 +138,14 @@ TEST(Cli, InfoPrintsTheTriangleCountByEps) {
   EXPECT_NE(twice.output.find("isovalue 0.1 is given twice"), std::string::npos) << twice.output;
 }
 
+// Spaces around the numbers of a list are allowed on either side; an empty item is not.
+TEST(Cli, NumberListsAllowSpacesAroundItems) {
+  EXPECT_EQ(Cli("info --volume sphere:9 --iso ' 0.5 , 0.7 ' --no-cache").code, 0);
+  const CliRun empty = Cli("info --volume sphere:9 --iso '0.5, ,0.7' --no-cache");
+  EXPECT_EQ(empty.code, 2);
+  EXPECT_NE(empty.output.find("'' is not a number"), std::string::npos) << empty.output;
+}
+
 // Two samples per axis is a valid volume: it pads to the smallest hierarchy, 3^3.
 TEST(Cli, TwoSamplesPerAxisExtract) {
   const std::string out = TempPath("cli-two.ply");
