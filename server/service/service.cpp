@@ -333,7 +333,8 @@ class ChunkStream : public Reactor, public StreamBase {
     bool cancel_call = false;
     {
       std::lock_guard<std::mutex> lock(mu_);
-      if (write_in_flight_ && !finish_called_ && !cancelling_ && now - write_started_ >= stall) {
+      if (write_in_flight_ && !finish_called_ && !call_cancelled_ &&
+          now - write_started_ >= stall) {
         // Finishing waits for the write in flight, which a client that stopped reading never
         // takes: the call is cancelled instead (the write then fails, and the stream finishes
         // with the status set here).
@@ -344,7 +345,7 @@ class ChunkStream : public Reactor, public StreamBase {
             grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
                          "the client read nothing for " + std::to_string(stall.count()) + " ms"));
         cancelling_ = true;  // no Finish (so no OnDone: context_ stays valid) until TryCancel
-        cancel_call = true;
+        call_cancelled_ = cancel_call = true;
       } else if (idle.count() > 0 && idle_timeout_applies_ && !finishing_ && !job_running_ &&
                  !pending_ && queue_.empty() && !write_in_flight_ && now - last_activity_ >= idle) {
         const auto seconds = std::chrono::duration_cast<std::chrono::seconds>(idle).count();
@@ -546,6 +547,7 @@ class ChunkStream : public Reactor, public StreamBase {
   bool write_in_flight_ = false;
   Clock::time_point write_started_;  // of the write in flight
   bool cancelling_ = false;          // Reap is cancelling the call: Finish waits
+  bool call_cancelled_ = false;      // by Reap, once
   uint64_t generation_ = 0;
   std::shared_ptr<std::atomic<bool>> cancel_ = std::make_shared<std::atomic<bool>>(false);
   std::optional<Pending> pending_;
