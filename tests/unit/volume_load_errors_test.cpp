@@ -1,0 +1,331 @@
+// LoadVolume's refusals: every malformed, truncated, out-of-range or unsupported input is answered
+// with the right status and a message naming the input (files written by volume_files.h).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "server/volume/load.h"
+#include "volume_files.h"
+
+namespace isostream {
+namespace {
+
+using namespace volume_files;
+
+TEST(VolumeLoadErrors, MissingFiles) {
+  for (const std::string name : {"missing.nii", "missing.nii.gz", "missing.vdb", "missing.txt"}) {
+    ExpectError(LoadVolume(ScratchPath(name)), absl::StatusCode::kNotFound, name);
+  }
+  ExpectError(LoadVolume("raw:" + ScratchPath("missing.raw") + ":2x2x2:uint8"),
+              absl::StatusCode::kNotFound, "missing.raw");
+  ExpectError(LoadVolume(ScratchPath("missing.vdb") + "#density"), absl::StatusCode::kNotFound,
+              "missing.vdb");
+}
+
+TEST(VolumeLoadErrors, NotAVolumeFile) {
+  const std::string text = ScratchPath("notes.txt");
+  WriteBytes(text, {'h', 'i'});
+  ExpectError(LoadVolume(text), absl::StatusCode::kInvalidArgument, "notes.txt");
+  ExpectError(LoadVolume(ScratchDir() + "/.."), absl::StatusCode::kInvalidArgument, "..");
+  const std::string dir = ScratchPath("dir.nii");
+  ASSERT_EQ(mkdir(dir.c_str(), 0755), 0);
+  ExpectError(LoadVolume(dir), absl::StatusCode::kInvalidArgument, "dir.nii");
+}
+
+TEST(VolumeLoadErrors, WrongMagic) {
+  NiftiFile nf;
+  nf.magic = "n+2";
+  std::string path = ScratchPath("bad_magic.nii");
+  WriteBytes(path, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "bad_magic.nii", "magic");
+
+  nf = NiftiFile();
+  nf.sizeof_hdr = 540;  // NIfTI-2
+  path = ScratchPath("nifti2.nii");
+  WriteBytes(path, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "nifti2.nii", "sizeof_hdr");
+
+  nf = NiftiFile();
+  nf.magic = "ni1";
+  path = ScratchPath("pair.nii");
+  WriteBytes(path, nf.Header());
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "pair.nii");
+
+  path = ScratchPath("garbage.vdb");
+  WriteBytes(path, std::vector<unsigned char>(200, 0x42));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "garbage.vdb", "magic");
+}
+
+TEST(VolumeLoadErrors, TruncatedData) {
+  NiftiFile nf;
+  const auto full = Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false));
+  const std::vector<unsigned char> cut(full.begin(), full.end() - 5);
+  std::string path = ScratchPath("short.nii");
+  WriteBytes(path, cut);
+  ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, "short.nii", "truncated");
+  path = ScratchPath("short.nii.gz");
+  WriteGz(path, cut);
+  ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, "short.nii.gz", "truncated");
+
+  // A gzip stream cut in the middle, not just short data inside a whole stream.
+  WriteGz(ScratchPath("whole.nii.gz"), full);
+  std::vector<unsigned char> gz = ReadBytes(ScratchPath("whole.nii.gz"));
+  gz.resize(gz.size() / 2);
+  path = ScratchPath("cut_stream.nii.gz");
+  WriteBytes(path, gz);
+  ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, "cut_stream.nii.gz");
+
+  path = ScratchPath("short_header.nii");
+  WriteBytes(path, std::vector<unsigned char>(full.begin(), full.begin() + 200));
+  ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, "short_header.nii", "header");
+
+  path = ScratchPath("short.raw");
+  WriteBytes(path, Samples(Type::kUint16, {4, 4, 3}, false));
+  ExpectError(LoadVolume("raw:" + path + ":4x4x4:uint16"), absl::StatusCode::kDataLoss, "short.raw",
+              "truncated");
+
+  const std::string vdb = WriteVdb("whole.vdb", {TestGrid("density", 1.0f)});
+  std::vector<unsigned char> bytes = ReadBytes(vdb);
+  // OpenVDB itself misses a tail of 1-7 bytes (the last voxels read as garbage).
+  // 8 bytes: the magic alone, no grids.
+  for (size_t keep :
+       {size_t{8}, bytes.size() / 2, bytes.size() - 10, bytes.size() - 7, bytes.size() - 1}) {
+    path = ScratchPath("short_" + std::to_string(keep) + ".vdb");
+    WriteBytes(path, std::vector<unsigned char>(bytes.begin(), bytes.begin() + keep));
+    ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, path);
+  }
+}
+
+TEST(VolumeLoadErrors, RawFileLargerThanSpec) {
+  const std::string path = ScratchPath("long.raw");
+  WriteBytes(path, Samples(Type::kUint8, {4, 4, 5}, false));
+  ExpectError(LoadVolume("raw:" + path + ":4x4x4:uint8"), absl::StatusCode::kInvalidArgument,
+              "long.raw");
+}
+
+// A compressed raw file's size is known only once read: surplus samples are refused all the
+// same (they mean wrong dims or type, which would load as plausible garbage).
+TEST(VolumeLoadErrors, GzipRawFileLargerThanSpec) {
+  const std::string path = ScratchPath("long.raw.gz");
+  WriteGz(path, Samples(Type::kUint8, {4, 4, 5}, false));
+  ExpectError(LoadVolume("raw:" + path + ":4x4x4:uint8"), absl::StatusCode::kInvalidArgument,
+              "long.raw.gz", "more than the 64 bytes");
+  absl::StatusOr<VolumePtr> exact = LoadVolume("raw:" + path + ":4x4x5:uint8");
+  ASSERT_TRUE(exact.ok()) << exact.status();
+}
+
+TEST(VolumeLoadErrors, DimsBelowTwo) {
+  NiftiFile nf;
+  nf.dims = {4, 1, 4};
+  const std::string path = ScratchPath("flat.nii");
+  WriteBytes(path, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "flat.nii", "4x1x4");
+
+  const std::string raw = ScratchPath("flat.raw");
+  WriteBytes(raw, Samples(Type::kUint8, {1, 4, 4}, false));
+  ExpectError(LoadVolume("raw:" + raw + ":1x4x4:uint8"), absl::StatusCode::kInvalidArgument,
+              "flat.raw");
+
+  auto grid = openvdb::FloatGrid::create();
+  grid->tree().setValue(openvdb::Coord(0, 0, 0), 1.0f);
+  grid->tree().setValue(openvdb::Coord(3, 0, 3), 1.0f);
+  const std::string vdb = WriteVdb("flat.vdb", {grid});
+  ExpectError(LoadVolume(vdb), absl::StatusCode::kInvalidArgument, "flat.vdb");
+
+  const std::string empty = WriteVdb("empty.vdb", {openvdb::FloatGrid::create()});
+  ExpectError(LoadVolume(empty), absl::StatusCode::kInvalidArgument, "empty.vdb", "no active");
+
+  nf = NiftiFile();
+  nf.dim0 = 4;
+  nf.dim4 = 2;  // a time series
+  const std::string series = ScratchPath("series.nii");
+  WriteBytes(series, Concat(nf.Header(), Samples(Type::kFloat32, {5, 4, 6}, false)));
+  ExpectError(LoadVolume(series), absl::StatusCode::kInvalidArgument, "series.nii", "3D");
+}
+
+TEST(VolumeLoadErrors, DimsAboveLimits) {
+  VolumeLimits limits;
+  limits.max_dim = 8;
+  limits.max_voxels = 300;
+
+  NiftiFile nf;
+  nf.dims = {9, 2, 2};
+  std::string path = ScratchPath("wide.nii");
+  WriteBytes(path, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(path, limits), absl::StatusCode::kResourceExhausted, "wide.nii");
+
+  nf.dims = {8, 8, 8};  // each axis fine, 512 samples too many
+  path = ScratchPath("many.nii");
+  WriteBytes(path, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(path, limits), absl::StatusCode::kResourceExhausted, "many.nii");
+
+  // Refused from the header alone: the data for 30000^3 samples is not there to read.
+  nf.dims = {30000, 30000, 30000};
+  path = ScratchPath("huge.nii");
+  WriteBytes(path, nf.Header());
+  ExpectError(LoadVolume(path), absl::StatusCode::kResourceExhausted, "huge.nii");
+
+  ExpectError(LoadVolume("raw:" + ScratchPath("nothing.raw") + ":2000x2x2:uint8"),
+              absl::StatusCode::kResourceExhausted, "nothing.raw");
+
+  const std::string vdb = WriteVdb("big.vdb", {TestGrid("density", 1.0f)});  // 10x9x12
+  ExpectError(LoadVolume(vdb, limits), absl::StatusCode::kResourceExhausted, "big.vdb");
+
+  ExpectError(LoadVolume("sphere:9", limits), absl::StatusCode::kResourceExhausted, "sphere:9");
+  ExpectError(LoadVolume("noise:7", limits), absl::StatusCode::kResourceExhausted, "noise:7");
+  EXPECT_TRUE(LoadVolume("noise:6", limits).ok());
+}
+
+TEST(VolumeLoadErrors, UnsupportedTypes) {
+  NiftiFile nf;
+  nf.datatype = 32;  // complex64
+  nf.bitpix = 64;
+  std::string path = ScratchPath("complex.nii");
+  WriteBytes(path, Concat(nf.Header(), std::vector<unsigned char>(5 * 4 * 3 * 8, 0)));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "complex.nii", "datatype");
+
+  nf.datatype = 16;
+  nf.bitpix = 16;  // disagrees with float32
+  path = ScratchPath("bitpix.nii");
+  WriteBytes(path, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "bitpix.nii", "bitpix");
+
+  path = ScratchPath("any.raw");
+  WriteBytes(path, std::vector<unsigned char>(64, 0));
+  ExpectError(LoadVolume("raw:" + path + ":2x2x2:int64"), absl::StatusCode::kInvalidArgument,
+              "any.raw", "int64");
+
+  auto vectors = openvdb::Vec3SGrid::create();
+  vectors->setName("velocity");
+  vectors->tree().setValue(openvdb::Coord(0), openvdb::Vec3s(1, 2, 3));
+  const std::string vdb = WriteVdb("vectors.vdb", {vectors});
+  ExpectError(LoadVolume(vdb), absl::StatusCode::kInvalidArgument, "vectors.vdb", "float grid");
+  ExpectError(LoadVolume(vdb + "#velocity"), absl::StatusCode::kInvalidArgument, "vectors.vdb",
+              "vec3s");
+  ExpectError(LoadVolume(vdb + "#pressure"), absl::StatusCode::kNotFound, "vectors.vdb",
+              "pressure");
+
+  auto rotated = TestGrid("density", 1.0f);
+  rotated->transform().preRotate(0.3, openvdb::math::Z_AXIS);
+  const std::string rotated_path = WriteVdb("rotated.vdb", {rotated});
+  ExpectError(LoadVolume(rotated_path), absl::StatusCode::kInvalidArgument, "rotated.vdb",
+              "axis-aligned");
+}
+
+TEST(VolumeLoadErrors, NonFiniteSamples) {
+  const std::array<int, 3> dims{4, 3, 10};
+  std::vector<float> values(4 * 3 * 10, 1.0f);
+  values[(9 * 3 + 1) * 4 + 2] = std::numeric_limits<float>::quiet_NaN();  // (2, 1, 9)
+  values[(9 * 3 + 2) * 4 + 0] = std::numeric_limits<float>::infinity();  // later in x-fastest order
+  std::vector<unsigned char> bytes;
+  for (float v : values) Put(bytes, v, false);
+  std::string path = ScratchPath("nan.raw");
+  WriteBytes(path, bytes);
+  ExpectError(LoadVolume("raw:" + path + ":4x3x10:float32"), absl::StatusCode::kInvalidArgument,
+              "nan.raw", "NaN sample at index (2, 1, 9)");
+  // Rows of whole 8-sample leaf rows take the vector path: the same first offender, and the
+  // same range as a direct scan when all are finite.
+  std::vector<float> wide(17 * 9 * 9);
+  for (size_t i = 0; i < wide.size(); ++i) wide[i] = float(std::sin(0.37 * double(i))) * 3.0f;
+  std::vector<unsigned char> wide_bytes;
+  for (float v : wide) Put(wide_bytes, v, false);
+  path = ScratchPath("wide.raw");
+  WriteBytes(path, wide_bytes);
+  auto fine = LoadVolume("raw:" + path + ":17x9x9:float32");
+  ASSERT_TRUE(fine.ok()) << fine.status();
+  EXPECT_EQ((*fine)->min_value, *std::min_element(wide.begin(), wide.end()));
+  EXPECT_EQ((*fine)->max_value, *std::max_element(wide.begin(), wide.end()));
+  wide[(4 * 9 + 3) * 17 + 11] = std::numeric_limits<float>::quiet_NaN();  // (11, 3, 4)
+  wide[(8 * 9 + 8) * 17 + 3] = -std::numeric_limits<float>::infinity();   // later
+  wide_bytes.clear();
+  for (float v : wide) Put(wide_bytes, v, false);
+  WriteBytes(path, wide_bytes);
+  ExpectError(LoadVolume("raw:" + path + ":17x9x9:float32"), absl::StatusCode::kInvalidArgument,
+              "wide.raw", "NaN sample at index (11, 3, 4)");
+  wide[(4 * 9 + 3) * 17 + 11] = 0.0f;
+  wide_bytes.clear();
+  for (float v : wide) Put(wide_bytes, v, false);
+  WriteBytes(path, wide_bytes);
+  ExpectError(LoadVolume("raw:" + path + ":17x9x9:float32"), absl::StatusCode::kInvalidArgument,
+              "wide.raw", "Inf sample at index (3, 8, 8)");
+
+  NiftiFile nf;
+  nf.dims = dims;
+  nf.datatype = 64;
+  nf.bitpix = 64;
+  std::vector<unsigned char> data;
+  for (int i = 0; i < 120; ++i) Put(data, i == 17 ? -HUGE_VAL : 0.5, false);  // (1, 1, 1)
+  path = ScratchPath("inf.nii.gz");
+  WriteGz(path, Concat(nf.Header(), data));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "inf.nii.gz",
+              "Inf sample at index (1, 1, 1)");
+
+  // A finite float64 beyond float range is not representable either.
+  data.clear();
+  for (int i = 0; i < 120; ++i) Put(data, i == 5 ? 1e300 : 0.5, false);
+  path = ScratchPath("overflow.nii");
+  WriteBytes(path, Concat(nf.Header(), data));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "overflow.nii", "(1, 1, 0)");
+
+  auto grid = TestGrid("density", 1.0f);
+  grid->tree().setValue(openvdb::Coord(4, 10, 12), std::numeric_limits<float>::infinity());
+  grid->tree().setValue(openvdb::Coord(-2, 10, 12), std::numeric_limits<float>::quiet_NaN());
+  const std::string vdb = WriteVdb("nan.vdb", {grid});
+  // Box starts at (-3, 5, 7): the NaN is (1, 5, 5), before the Inf at (7, 5, 5), though the two
+  // lie in different leaves.
+  ExpectError(LoadVolume(vdb), absl::StatusCode::kInvalidArgument, "nan.vdb",
+              "NaN sample at index (1, 5, 5)");
+  grid->tree().setValue(openvdb::Coord(-2, 10, 12), 0.0f);
+  const std::string inf_vdb = WriteVdb("inf.vdb", {grid});
+  ExpectError(LoadVolume(inf_vdb), absl::StatusCode::kInvalidArgument, "inf.vdb",
+              "Inf sample at index (7, 5, 5)");
+}
+
+TEST(VolumeLoadErrors, BadGeneratorSpecs) {
+  ExpectError(LoadVolume("teapot:64"), absl::StatusCode::kNotFound, "teapot");
+  for (const std::string spec :
+       {"cayley:1", "cayley:0", "sphere:-3", "shells:abc", "shells:", "buckyball", "cayley:8:3",
+        "noise:8:x", "noise:8:-1", "noise:8:99999999999", "sphere:4x"}) {
+    if (spec == "buckyball") continue;  // a bare word is a file name, covered below
+    ExpectError(LoadVolume(spec), absl::StatusCode::kInvalidArgument, spec);
+  }
+  ExpectError(LoadVolume("cayley:1026"), absl::StatusCode::kResourceExhausted, "cayley:1026");
+  ExpectError(LoadVolume("cayley:99999999999999999999"), absl::StatusCode::kInvalidArgument,
+              "cayley:99999999999999999999");
+  ExpectError(LoadVolume("buckyball"), absl::StatusCode::kNotFound, "buckyball");
+  ExpectError(LoadVolume(""), absl::StatusCode::kInvalidArgument, "empty");
+}
+
+TEST(VolumeLoadErrors, MalformedRawSpecs) {
+  const std::string path = ScratchPath("ok.raw");
+  WriteBytes(path, Samples(Type::kUint8, {2, 2, 2}, false));
+  for (const std::string tail : {"", ":2x2x2", ":2x2:uint8", ":2x2x2x2:uint8", ":axbxc:uint8",
+                                 ":2x2x:uint8", ":2x2x2:uint8:middle", ":-2x2x2:uint8"}) {
+    const auto result = LoadVolume("raw:" + path + tail);
+    ASSERT_FALSE(result.ok()) << tail;
+    EXPECT_EQ(result.status().code(), absl::StatusCode::kInvalidArgument) << result.status();
+    EXPECT_NE(result.status().message().find("ok.raw"), std::string::npos) << result.status();
+  }
+  ExpectError(LoadVolume("raw::2x2x2:uint8"), absl::StatusCode::kInvalidArgument, "raw::2x2x2");
+  ASSERT_TRUE(LoadVolume("raw:" + path + ":2x2x2:uint8").ok());  // the file itself is fine
+  // A wrong last field after a type is a wrong byte order; with dims before it, a wrong type.
+  ExpectError(LoadVolume("raw:" + path + ":2x2x2:uint8:middle"), absl::StatusCode::kInvalidArgument,
+              "ok.raw", "byte order 'middle' is not le or be");
+  ExpectError(LoadVolume("raw:" + path + ":2x2x2:float"), absl::StatusCode::kInvalidArgument,
+              "ok.raw", "unsupported type 'float'");
+  ExpectError(LoadVolume("raw:" + path + ":2x2x2:float:be"), absl::StatusCode::kInvalidArgument,
+              "ok.raw", "unsupported type 'float'");
+  // PATH may hold colons: fields are taken from the right.
+  const std::string colons = ScratchPath("a:b:2x2x2:uint8.raw");
+  WriteBytes(colons, Samples(Type::kUint16, {2, 2, 2}, true));
+  absl::StatusOr<VolumePtr> v = LoadVolume("raw:" + colons + ":2x2x2:uint16:be");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->dims, (std::array<int, 3>{2, 2, 2}));
+  ExpectSamples(**v, [](int64_t i) { return float(StoredValue(Type::kUint16, i)); });
+}
+
+}  // namespace
+}  // namespace isostream
