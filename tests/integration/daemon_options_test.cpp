@@ -8,6 +8,7 @@
 #include <iterator>
 #include <thread>
 
+#include "tests/common/run_command.h"
 #include "tests/integration/daemon_fixture.h"
 
 // In the fixture's namespace: Daemon, MakeView, kIso, pb and the process helpers need no
@@ -390,6 +391,21 @@ TEST_F(OneSlotDaemon, ACancelledJobHoldsItsSlotUntilItEnds) {
   ASSERT_TRUE(last.ok()) << last;
   EXPECT_TRUE(Prepared("cayley:513")) << "a call got the slot while the cancelled job ran";
   if (refused == 0) GTEST_SKIP() << "the preparation ended before the first call";
+}
+
+// Flags it would have to misread stop isostreamd before it listens, exit 2 and say why.
+TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
+  const std::pair<std::string, std::string> refused[] = {
+      {"--volume a=sphere:9 --volume a=cayley:9", "--volume names 'a' twice"},
+      {"--listen 127.0.0.1:70000", "port in 0..65535"},
+      {"--log-level shouty", "log_level must be one of"},
+      {"--bogus", "--bogus"}};
+  for (const auto& [flags, reason] : refused) {
+    const CommandResult r =
+        RunCommand(std::string("timeout 20 ") + ISOSTREAMD_PATH + " --no-cache " + flags);
+    EXPECT_EQ(r.code, 2) << flags << "\n" << r.output;
+    EXPECT_NE(r.output.find(reason), std::string::npos) << flags << "\n" << r.output;
+  }
 }
 
 // One slot, a 2 s frame deadline and no idle timeout: a client that stops reading must not keep
