@@ -52,4 +52,21 @@ absl::Status ParseImageSize(std::string_view text, std::string_view what, int ma
   return absl::OkStatus();
 }
 
+absl::Status CheckPort(std::string_view address, bool required) {
+  const size_t colon = address.rfind(':');
+  const std::string_view port = colon == std::string_view::npos ? "" : address.substr(colon + 1);
+  const std::string_view digits = !port.empty() && port[0] == '-' ? port.substr(1) : port;
+  const bool numeric =
+      !digits.empty() && digits.find_first_not_of("0123456789") == std::string_view::npos;
+  if (!numeric && !required) return absl::OkStatus();
+  int value = 0;
+  const bool fits =
+      numeric && port[0] != '-' && digits.size() <= 5 &&
+      std::from_chars(digits.data(), digits.data() + digits.size(), value).ec == std::errc() &&
+      value <= 65535;
+  if (fits && colon != 0) return absl::OkStatus();
+  return absl::InvalidArgumentError("'" + std::string(address) +
+                                    "' is not HOST:PORT with a port in 0..65535");
+}
+
 }  // namespace isostream

@@ -1,4 +1,5 @@
-// "x,y,z"-style command-line values, shared by the CLI, the viewer and the mesh renderer.
+// "x,y,z"-style command-line values and ports, shared by the CLI, the viewer, the client, the
+// daemon's settings and the mesh renderer.
 #pragma once
 
 #include <string_view>
@@ -16,5 +17,11 @@ absl::StatusOr<std::vector<double>> ParseNumberList(std::string_view text, std::
 // overflow an int included: they are refused, not wrapped).
 absl::Status ParseImageSize(std::string_view text, std::string_view what, int max_side, int* width,
                             int* height);
+
+// The port of a "HOST:PORT" address, as gRPC would read it: InvalidArgument unless it is a
+// decimal number in 0..65535 (gRPC takes a larger one modulo 65536, a negative one by its low
+// 16 bits, and a missing one as 443). Without `required`, an address whose part after its last
+// ':' is not a number at all passes (a bare host, "[::1]").
+absl::Status CheckPort(std::string_view address, bool required);
 
 }  // namespace isostream

@@ -3,6 +3,7 @@
 #include "proto/health.grpc.pb.h"
 #include "shared/file_io.h"
 #include "shared/frame_codec.h"
+#include "shared/number_list.h"
 
 namespace isostream::net {
 
@@ -150,17 +151,8 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& opt
     if (ch < 0x20 || ch > 0x7e)
       return absl::InvalidArgumentError("the token must be printable ASCII characters");
   if (options.address.empty()) return absl::InvalidArgumentError("no server address given");
-  // A port past 65535 would be taken modulo 65536 (:104903 reached :39367), a negative one as
-  // its 16 low bits (:-1 reached :65535).
-  const size_t colon = options.address.rfind(':');
-  if (colon != std::string::npos && colon + 1 < options.address.size()) {
-    const std::string port = options.address.substr(colon + 1);
-    const std::string digits = port[0] == '-' ? port.substr(1) : port;
-    if (!digits.empty() && digits.find_first_not_of("0123456789") == std::string::npos &&
-        (port[0] == '-' || port.size() > 5 || std::stoi(port) > 65535))
-      return absl::InvalidArgumentError("port " + port + " of " + options.address +
-                                        " is not in 0..65535");
-  }
+  // :104903 had reached :39367, and :-1 :65535.
+  ISOSTREAM_RETURN_IF_ERROR(CheckPort(options.address, /*required=*/false));
   auto c = std::unique_ptr<Client>(new Client());
   c->options_ = options;
   grpc::ChannelArguments args;

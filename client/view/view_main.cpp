@@ -29,6 +29,7 @@
 #include "client/view/frame_upload.h"
 #include "client/view/view_request.h"
 #include "client/view/window_view.h"
+#include "shared/given_number.h"
 #include "shared/number_list.h"
 
 namespace isostream::view {
@@ -359,10 +360,7 @@ int main(int argc, char** argv) {
   app.add_option("--server", args.server, "daemon address (default 127.0.0.1:7878)");
   app.add_option("--volume", args.volume, "catalogue name, e.g. buckyball:129")->required();
   app.add_option("--iso", args.iso, "isovalues, comma separated (default: 20/40/60% of the range)");
-  // CLI11 reads an empty number as 0: `--eps ""` would silently ask for full resolution.
-  const CLI::Validator given_number(
-      [](std::string& text) { return text.empty() ? std::string("a number is needed") : ""; },
-      "NUMBER");
+  const CLI::Validator given_number = isostream::GivenNumber();
   auto* eps = app.add_option("--eps", args.eps, "error bound in data units")->check(given_number);
   auto* budget = app.add_option("--budget", args.budget, "triangle budget")->check(given_number);
   eps->excludes(budget);

@@ -6,6 +6,7 @@
 #include <glm/geometric.hpp>
 #include <limits>
 
+#include "shared/given_number.h"
 #include "shared/number_list.h"
 
 namespace isostream::cli {
@@ -49,10 +50,7 @@ absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args) {
 
 void AddViewOptions(CLI::App* cmd, ViewArgs* args) {
   cmd->add_option("--iso", args->iso, "isovalues, comma separated (at most 16)")->required();
-  // CLI11 reads an empty number as 0: `--eps ""` would silently ask for full resolution.
-  const CLI::Validator given_number(
-      [](std::string& text) { return text.empty() ? std::string("a number is needed") : ""; },
-      "NUMBER");
+  const CLI::Validator given_number = GivenNumber();
   auto* eps = cmd->add_option("--eps", args->eps, "error bound in data units (0: full resolution)")
                   ->check(given_number);
   auto* budget =

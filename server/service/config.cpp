@@ -7,6 +7,8 @@
 #include <sstream>
 #include <type_traits>
 
+#include "shared/number_list.h"
+
 namespace isostream::service {
 namespace {
 
@@ -160,12 +162,7 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   if (!kLevels.count(c.log_level))
     return bad("log_level must be one of trace, debug, info, warn, error, critical, off; got '" +
                c.log_level + "'");
-  // HOST:PORT with a port in 0..65535 (gRPC takes a larger one modulo 65536, and a missing
-  // one as 443).
-  const size_t colon = c.listen.rfind(':');
-  const std::string port = colon == std::string::npos ? "" : c.listen.substr(colon + 1);
-  if (colon == 0 || port.empty() || port.size() > 5 ||
-      port.find_first_not_of("0123456789") != std::string::npos || std::stoi(port) > 65535)
+  if (!CheckPort(c.listen, /*required=*/true).ok())
     return bad("listen must be HOST:PORT with a port in 0..65535; got '" + c.listen + "'");
   return absl::OkStatus();
 }
