@@ -92,8 +92,7 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   for (size_t i = 0; i < r.isovalues.size(); ++i) sorted.push_back({r.isovalues[i], int(i)});
   std::sort(sorted.begin(), sorted.end());
   c.iso_count = 0;
-  for (size_t i = 0; i < sorted.size(); ++i) {
-    if (c.iso_count > 0 && c.iso[c.iso_count - 1] == sorted[i].first) continue;  // duplicate
+  for (size_t i = 0; i < sorted.size(); ++i) {  // distinct: ValidateRequest refuses repeats
     c.iso[c.iso_count] = sorted[i].first;
     c.iso_surface[c.iso_count++] = uint8_t(sorted[i].second);
   }
