@@ -21,6 +21,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "client/net/session_client.h"
 #include "client/render/camera.h"
 #include "client/render/headless_context.h"
@@ -195,8 +196,7 @@ int Run(const Args& args) {
   }
   // PNG is all it writes: another extension would name a file holding something else.
   const std::string& out = args.output;
-  if (!out.empty() && (out.size() < 4 || (out.compare(out.size() - 4, 4, ".png") != 0 &&
-                                          out.compare(out.size() - 4, 4, ".PNG") != 0)))
+  if (!out.empty() && !absl::EndsWithIgnoreCase(out, ".png"))
     return Fail(
         absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" + out + "'"));
   int width = 0, height = 0;

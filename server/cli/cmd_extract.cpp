@@ -2,6 +2,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "absl/strings/match.h"
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
 #include "server/extract/extractor.h"
@@ -17,11 +18,6 @@ struct ExtractArgs {
   std::string output;
   bool stats = false;
 };
-
-bool EndsWith(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() &&
-         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
 
 void PrintStats(const ExtractRequest& r, const ExtractStats& s, const PreparedVolume& p) {
   std::printf("triangles     %lld  (vertices %lld)\n", (long long)s.triangles,
@@ -40,8 +36,8 @@ void PrintStats(const ExtractRequest& r, const ExtractStats& s, const PreparedVo
 }
 
 int RunExtract(const ExtractArgs& args) {
-  const bool glb = EndsWith(args.output, ".glb");
-  if (!glb && !EndsWith(args.output, ".ply")) {
+  const bool glb = absl::EndsWithIgnoreCase(args.output, ".glb");
+  if (!glb && !absl::EndsWithIgnoreCase(args.output, ".ply")) {
     std::cerr << "isostream extract: -o must end in .ply or .glb, got '" << args.output << "'\n";
     return 2;
   }

@@ -6,19 +6,13 @@
 #include <new>
 #include <string>
 
+#include "absl/strings/match.h"
 #include "server/volume/generators.h"
 #include "server/volume/loaders.h"
 #include "server/volume/sample_reader.h"
 
 namespace isostream {
 namespace {
-
-bool EndsWith(std::string_view s, std::string_view suffix) {
-  if (s.size() < suffix.size()) return false;
-  return std::equal(suffix.begin(), suffix.end(), s.end() - suffix.size(), [](char a, char b) {
-    return std::tolower(static_cast<unsigned char>(a)) == b;
-  });
-}
 
 // "word:..." with a word of two or more letters, digits or '_' is a generator spec, so that an
 // unknown generator gets "unknown generator" rather than "no such file"; the length rule keeps
@@ -49,8 +43,8 @@ absl::StatusOr<VolumePtr> LoadFromSpec(std::string_view spec, const VolumeLimits
     path = spec_text.substr(0, hash);
     grid_name = spec_text.substr(hash + 1);
   }
-  if (EndsWith(path, ".vdb")) return LoadVdbFile(spec_text, path, grid_name, limits);
-  if (EndsWith(path, ".nii") || EndsWith(path, ".nii.gz")) {
+  if (absl::EndsWithIgnoreCase(path, ".vdb")) return LoadVdbFile(spec_text, path, grid_name, limits);
+  if (absl::EndsWithIgnoreCase(path, ".nii") || absl::EndsWithIgnoreCase(path, ".nii.gz")) {
     return LoadNiftiFile(spec_text, path, limits);
   }
   ISOSTREAM_RETURN_IF_ERROR(CheckInputFile(path));
