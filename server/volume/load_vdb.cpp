@@ -14,6 +14,7 @@
 #include "server/volume/grid_blocks.h"
 #include "server/volume/loaders.h"
 #include "server/volume/sample_reader.h"
+#include "server/volume/vdb_structure.h"
 
 namespace isostream {
 namespace {
@@ -100,6 +101,7 @@ absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string
     return absl::InvalidArgumentError(path + ": not an OpenVDB file (wrong magic number)");
   }
   InitializeOpenVdbOnce();
+  ISOSTREAM_RETURN_IF_ERROR(CheckVdbStructure(path));
 
   openvdb::io::File file(path);
   try {

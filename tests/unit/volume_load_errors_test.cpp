@@ -2,6 +2,7 @@
 // with the right status and a message naming the input (files written by volume_files.h).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -57,6 +58,56 @@ TEST(VolumeLoadErrors, WrongMagic) {
   path = ScratchPath("garbage.vdb");
   WriteBytes(path, std::vector<unsigned char>(200, 0x42));
   ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "garbage.vdb", "magic");
+}
+
+// Damaged counts and lengths in an OpenVDB file's framing are refused before OpenVDB reads them
+// (it would allocate what they claim, or loop on them): DataLoss naming the byte.
+TEST(VolumeLoadErrors, DamagedVdbFraming) {
+  const std::vector<unsigned char> good =
+      ReadBytes(WriteVdb("framing.vdb", {TestGrid("density", 1.0f)}));
+  // Offset of the 4-byte length field in front of string `s` (its first occurrence).
+  auto length_of = [&](const std::string& s) {
+    const auto at = std::search(good.begin(), good.end(), s.begin(), s.end());
+    EXPECT_NE(at, good.end()) << s;
+    return size_t(at - good.begin()) - 4;
+  };
+  auto patched = [&](const std::string& name, size_t at, uint32_t value) {
+    std::vector<unsigned char> bytes = good;
+    PutAt<uint32_t>(bytes, at, value, false);
+    const std::string path = ScratchPath(name);
+    WriteBytes(path, bytes);
+    return path;
+  };
+  struct Case {
+    const char* name;
+    size_t at;
+    uint32_t value;
+    const char* says;
+    size_t reported_at;  // where the message says the fault is (root counts: both at the first)
+  };
+  const size_t map = length_of("ScaleTranslateMap");
+  const size_t root_tiles = map + 4 + 17 + 6 * 24 + 4 + 4;
+  const Case cases[] = {
+      {"string_length.vdb", length_of("file_compression"), 0x7f000000u, "metadata name claims", 0},
+      {"value_size.vdb", length_of("file_bbox_max") + 4 + 13 + 4 + 5, 0x7f000000u,
+       "'file_bbox_max' (vec3i) claims", 0},
+      {"typed_size.vdb", length_of("file_bbox_max") + 4 + 13 + 4 + 5, 16, "its type 12", 0},
+      {"metadata_count.vdb", length_of("file_bbox_max") - 4, 0x01000000u, "claims 16777216", 0},
+      {"grid_name.vdb", length_of("density"), 0xffffffffu, "grid name claims", 0},
+      {"transform.vdb", map, 0x7f000000u, "transform type claims", 0},
+      {"root_tiles.vdb", root_tiles, 0x10000000u, "root claims 268435456 tiles", 0},
+      {"root_children.vdb", root_tiles + 4, 3, "and 3 children", root_tiles},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string path = patched(c.name, c.at, c.value);
+    ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, c.name, c.says);
+    ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss,
+                "byte " + std::to_string(c.reported_at ? c.reported_at : c.at) + ":");
+  }
+  // A sound file this build does not read: an old format version.
+  ExpectError(LoadVolume(patched("old.vdb", 8, 221)), absl::StatusCode::kInvalidArgument,
+              "old.vdb", "file format version 221");
 }
 
 TEST(VolumeLoadErrors, TruncatedData) {

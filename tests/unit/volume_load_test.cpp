@@ -1,8 +1,10 @@
 // LoadVolume from files: round trips through real .vdb, .nii, .nii.gz and raw files written here
 // (volume_files.h); volume_load_errors_test.cpp has the inputs it refuses.
 #include <gtest/gtest.h>
+#include <openvdb/io/Stream.h>
 
 #include <cmath>
+#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
@@ -174,6 +176,52 @@ TEST(VolumeLoadVdb, TilesAndBackgroundInsideTheBox) {
   EXPECT_EQ(Sample(**v, 3, 3, 3), 4.0f);
   EXPECT_EQ(Sample(**v, 18, 3, 3), -2.0f);
   EXPECT_EQ(Sample(**v, 20, 3, 3), 9.0f);
+}
+
+// The files OpenVDB writes in its other ways pass the framing check (vdb_structure.h) and load
+// the same samples: half-float storage, an instance sharing its parent's tree, file-level
+// metadata of several types, uncompressed and zip-compressed data, and a stream written without
+// grid offsets.
+TEST(VolumeLoadVdb, EveryWayOfWritingLoads) {
+  auto expect_test_grid = [](const std::string& spec, float tolerance) {
+    SCOPED_TRACE(spec);
+    absl::StatusOr<VolumePtr> v = LoadVolume(spec);
+    ASSERT_TRUE(v.ok()) << v.status();
+    EXPECT_EQ((*v)->dims, (std::array<int, 3>{10, 9, 12}));
+    EXPECT_NEAR(Sample(**v, 9, 8, 11), 6 * 3 + 13 * 5 - 18 * 7, tolerance);
+  };
+  auto half = TestGrid("half", 1.0f);
+  half->setSaveFloatAsHalf(true);
+  expect_test_grid(WriteVdb("half.vdb", {half}), 0.25f);
+
+  auto parent = TestGrid("parent", 1.0f);
+  auto instance = parent->copyGrid();  // shares the tree: written as an instance
+  instance->setName("instance");
+  expect_test_grid(WriteVdb("instance.vdb", {parent, instance}) + "#instance", 0);
+
+  openvdb::MetaMap meta;
+  meta.insertMeta("author", openvdb::StringMetadata("isostream tests"));
+  meta.insertMeta("flag", openvdb::BoolMetadata(true));
+  meta.insertMeta("frame", openvdb::Int64Metadata(42));
+  meta.insertMeta("matrix", openvdb::Mat4DMetadata(openvdb::Mat4d::identity()));
+  meta.insertMeta("empty", openvdb::StringMetadata(""));
+  for (const uint32_t compression : {uint32_t{openvdb::io::COMPRESS_NONE},
+                                     uint32_t{openvdb::io::COMPRESS_ZIP} |
+                                         uint32_t{openvdb::io::COMPRESS_ACTIVE_MASK}}) {
+    const std::string path = ScratchPath("meta_" + std::to_string(compression) + ".vdb");
+    openvdb::io::File file(path);
+    file.setCompression(compression);
+    file.write({TestGrid("density", 1.0f)}, meta);
+    file.close();
+    expect_test_grid(path, 0);
+  }
+
+  const std::string stream_path = ScratchPath("stream.vdb");
+  {
+    std::ofstream out(stream_path, std::ios::binary);
+    openvdb::io::Stream(out).write({TestGrid("density", 1.0f)});
+  }
+  expect_test_grid(stream_path, 0);
 }
 
 // Voxels of 10 microns in metres are real data (OpenVDB's transforms refuse their scale): they

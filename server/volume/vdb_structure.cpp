@@ -1,0 +1,320 @@
+// The framing check of OpenVDB files (vdb_structure.h). It follows OpenVDB's own read order
+// (io::Archive::readHeader, MetaMap::readMeta, GridDescriptor::read, Archive::readGrid,
+// Transform::read, RootNode::readTopology) for file versions 222-224, little-endian as written
+// on x86 and ARM.
+#include "server/volume/vdb_structure.h"
+
+#include <openvdb/Metadata.h>
+#include <openvdb/openvdb.h>
+
+#include <cctype>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <string>
+
+namespace isostream {
+namespace {
+
+// Whatever went wrong, at which byte; `unsupported` for a sound file this loader cannot read.
+struct Defect {
+  int64_t at = 0;
+  std::string what;
+  bool unsupported = false;
+};
+
+// Reads a file piece by piece inside a window [pos, end), never past it.
+class WindowReader {
+ public:
+  WindowReader(FILE* f, int64_t size) : f_(f), size_(size), end_(size) {}
+
+  int64_t pos() const { return pos_; }
+  int64_t left() const { return end_ - pos_; }
+  int64_t size() const { return size_; }
+  int64_t end() const { return end_; }
+  void SetEnd(int64_t end) { end_ = end; }
+  bool Seek(int64_t at) {
+    if (at < 0 || at > end_ || fseeko(f_, at, SEEK_SET) != 0) return false;
+    pos_ = at;
+    return true;
+  }
+  bool Read(void* out, int64_t n) {
+    if (n < 0 || n > left() || std::fread(out, 1, size_t(n), f_) != size_t(n)) return false;
+    pos_ += n;
+    return true;
+  }
+  bool Skip(int64_t n) { return n >= 0 && n <= left() && Seek(pos_ + n); }
+  template <typename T>
+  bool Get(T* v) {
+    unsigned char b[sizeof(T)];
+    if (!Read(b, sizeof(T))) return false;
+    std::memcpy(v, b, sizeof(T));
+    return true;
+  }
+
+ private:
+  FILE* f_;
+  int64_t size_;
+  int64_t end_;
+  int64_t pos_ = 0;
+};
+
+class VdbStructure {
+ public:
+  explicit VdbStructure(WindowReader* in) : in_(*in) {}
+
+  // The whole file; false with defect() set at the first fault.
+  bool Check() {
+    if (!Header() || !MetaMap("file metadata")) return false;
+    int32_t grids = 0;
+    const int64_t count_at = in_.pos();
+    if (!Get(&grids, "grid count")) return false;
+    // A descriptor is at least three string lengths and three offsets.
+    if (grids < 0 || int64_t{grids} * 36 > in_.left())
+      return Fail(count_at, "grid count " + std::to_string(grids) + " does not fit the file");
+    if (!has_offsets_ && grids > 1)
+      return Unsupported(count_at, "several grids written without grid offsets (a stream): "
+                                   "save the file with openvdb::io::File");
+    for (int32_t g = 0; g < grids; ++g)
+      if (!Grid(g)) return false;
+    return true;
+  }
+
+  const Defect& defect() const { return defect_; }
+
+ private:
+  bool Fail(int64_t at, std::string what) {
+    defect_ = {at, std::move(what), false};
+    return false;
+  }
+  bool Unsupported(int64_t at, std::string what) {
+    defect_ = {at, std::move(what), true};
+    return false;
+  }
+  template <typename T>
+  bool Get(T* v, const char* what) {
+    const int64_t at = in_.pos();
+    return in_.Get(v) || Fail(at, std::string(what) + " runs past its end");
+  }
+
+  // OpenVDB's string: a uint32 length, then the bytes.
+  bool String(std::string* out, const char* what, uint32_t max_length) {
+    const int64_t at = in_.pos();
+    uint32_t length = 0;
+    if (!Get(&length, what)) return false;
+    if (length > max_length || int64_t{length} > in_.left())
+      return Fail(at, std::string(what) + " claims " + std::to_string(length) + " bytes");
+    out->resize(length);
+    return length == 0 || in_.Read(out->data(), length) || Fail(at, what);
+  }
+
+  bool Header() {
+    unsigned char magic[8];
+    if (!in_.Read(magic, 8)) return Fail(0, "shorter than a header");
+    const int64_t expected = openvdb::OPENVDB_MAGIC;
+    if (std::memcmp(magic, &expected, 8) != 0) return Fail(0, "wrong magic number");
+    uint32_t version = 0, library[2];
+    if (!Get(&version, "file version")) return false;
+    if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION ||
+        version > openvdb::OPENVDB_FILE_VERSION)
+      return Unsupported(8, "file format version " + std::to_string(version) + " (this build reads " +
+                                std::to_string(openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) +
+                                "-" + std::to_string(openvdb::OPENVDB_FILE_VERSION) +
+                                ": files written by OpenVDB 3 or later)");
+    if (!Get(&library[0], "library version") || !Get(&library[1], "library version"))
+      return false;
+    uint8_t offsets = 0;
+    if (!Get(&offsets, "grid offset flag")) return false;
+    if (offsets > 1) return Fail(in_.pos() - 1, "grid offset flag is " + std::to_string(offsets));
+    has_offsets_ = offsets == 1;
+    // The UUID as text, 8-4-4-4-12 hex digits: OpenVDB reads it with operator>>, and a
+    // malformed one fails the stream silently, after which every count it reads is garbage.
+    char uuid[36];
+    const int64_t uuid_at = in_.pos();
+    if (!in_.Read(uuid, 36)) return Fail(uuid_at, "file UUID runs past the end");
+    for (int i = 0; i < 36; ++i) {
+      const bool dash = i == 8 || i == 13 || i == 18 || i == 23;
+      if (dash ? uuid[i] != '-' : !std::isxdigit(static_cast<unsigned char>(uuid[i])))
+        return Fail(uuid_at + i, "file UUID is malformed");
+    }
+    return true;
+  }
+
+  // MetaMap::readMeta: a count, then (name, type name, byte size, value) per entry.
+  bool MetaMap(const char* what) {
+    const int64_t at = in_.pos();
+    uint32_t count = 0;
+    if (!Get(&count, what)) return false;
+    if (int64_t{count} * 12 > in_.left())
+      return Fail(at, std::string(what) + " claims " + std::to_string(count) + " entries");
+    for (uint32_t i = 0; i < count; ++i) {
+      std::string name, type;
+      if (!String(&name, "metadata name", 1u << 16) || !String(&type, "metadata type", 256))
+        return false;
+      if (!MetadataValue(name, type)) return false;
+    }
+    return true;
+  }
+
+  bool MetadataValue(const std::string& name, const std::string& type) {
+    const int64_t at = in_.pos();
+    uint32_t bytes = 0;
+    if (!Get(&bytes, "metadata size")) return false;
+    const std::string where = "metadata '" + name + "' (" + type + ")";
+    if (int64_t{bytes} > in_.left())
+      return Fail(at, where + " claims " + std::to_string(bytes) + " bytes");
+    const int64_t value_end = in_.pos() + bytes;
+    if (type == "__delayedload") return DelayedLoad(bytes, value_end, where);
+    if (type != "string" && openvdb::Metadata::isRegisteredType(type)) {
+      // A typed value is read at its type's size whatever the size field says: a mismatch
+      // would shift every read after it.
+      const uint32_t size = openvdb::Metadata::createMetadata(type)->size();
+      if (bytes != size)
+        return Fail(at, where + " has " + std::to_string(bytes) + " bytes, its type " +
+                            std::to_string(size));
+    }
+    return in_.Skip(bytes) || Fail(at, where);
+  }
+
+  // io::DelayedLoadMetadata: per-leaf masks and compressed sizes, each either raw (a zero byte
+  // count) or a Blosc buffer whose header states the size OpenVDB reserves for it.
+  bool DelayedLoad(uint32_t bytes, int64_t value_end, const std::string& where) {
+    if (bytes == 0) return true;
+    const int64_t saved_end = in_.end();
+    in_.SetEnd(value_end);  // OpenVDB reads what it needs, so a short value is a fault
+    const bool ok = DelayedLoadParts(where);
+    in_.SetEnd(saved_end);
+    return ok && (in_.Seek(value_end) || Fail(value_end, where));
+  }
+  bool DelayedLoadParts(const std::string& where) {
+    const int64_t at = in_.pos();
+    uint32_t count = 0;
+    if (!Get(&count, "delayed-load count")) return false;
+    // One entry per leaf node, each of which takes at least a 64-byte mask in the file.
+    if (int64_t{count} * 64 > in_.size() + (int64_t{1} << 20))
+      return Fail(at, where + " counts " + std::to_string(count) + " leaves");
+    for (int part = 0; part < 2; ++part) {
+      const int64_t element = part == 0 ? 1 : 8;  // mask bytes, then compressed sizes
+      const int64_t size_at = in_.pos();
+      uint32_t compressed = 0;
+      if (!Get(&compressed, "delayed-load part size")) return false;
+      if (part == 1 && compressed == UINT32_MAX) return true;  // no compressed sizes
+      if (compressed == 0) {
+        if (!in_.Skip(int64_t{count} * element)) return Fail(size_at, where + " is short");
+        continue;
+      }
+      unsigned char blosc[16];
+      if (compressed < sizeof(blosc) || !in_.Read(blosc, sizeof(blosc)))
+        return Fail(size_at, where + " holds a damaged compressed part");
+      uint32_t uncompressed = 0;
+      std::memcpy(&uncompressed, blosc + 4, 4);
+      if (int64_t{uncompressed} > int64_t{count} * element + 64)
+        return Fail(size_at + 4, where + " would unpack to " + std::to_string(uncompressed) +
+                                     " bytes");
+      if (!in_.Skip(int64_t{compressed} - int64_t{sizeof(blosc)}))
+        return Fail(size_at, where + " is short");
+    }
+    return true;
+  }
+
+  // GridDescriptor::read, then the grid at its offsets (or inline, in a stream-written file).
+  bool Grid(int32_t index) {
+    const std::string where = "grid " + std::to_string(index);
+    std::string unique_name, type, parent;
+    if (!String(&unique_name, "grid name", 1u << 16) || !String(&type, "grid type", 256) ||
+        !String(&parent, "instance parent name", 1u << 16))
+      return false;
+    const int64_t offsets_at = in_.pos();
+    int64_t grid_pos = 0, block_pos = 0, end_pos = 0;
+    if (!Get(&grid_pos, "grid offsets") || !Get(&block_pos, "grid offsets") ||
+        !Get(&end_pos, "grid offsets"))
+      return false;
+    const bool instance = !parent.empty();
+    if (has_offsets_) {
+      // An instance has no tree, and its descriptor no block offset.
+      const int64_t topology_end = instance ? end_pos : block_pos;
+      if (grid_pos < in_.pos() || grid_pos > topology_end || topology_end > end_pos ||
+          end_pos > in_.size())
+        return Fail(offsets_at, where + " offsets " + std::to_string(grid_pos) + ", " +
+                                    std::to_string(block_pos) + ", " + std::to_string(end_pos) +
+                                    " lie outside the file");
+      if (!in_.Seek(grid_pos)) return Fail(grid_pos, where);
+      in_.SetEnd(topology_end);  // the metadata, transform and topology come before it
+    }
+    const bool ok = GridBody(type, !instance, where);
+    in_.SetEnd(in_.size());
+    return ok && (!has_offsets_ || in_.Seek(end_pos) || Fail(end_pos, where));
+  }
+
+  // Archive::readGrid up to the voxel data: compression flags, metadata, transform, and for a
+  // float tree its root's tile and child counts.
+  bool GridBody(const std::string& type, bool has_tree, const std::string& where) {
+    const int64_t at = in_.pos();
+    uint32_t compression = 0;
+    if (!Get(&compression, "compression flags")) return false;
+    if (compression > (openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK |
+                       openvdb::io::COMPRESS_BLOSC))
+      return Fail(at, where + " compression flags " + std::to_string(compression));
+    if (!MetaMap("grid metadata") || !Transform(where)) return false;
+    const bool float_tree = type == "Tree_float_5_4_3" || type == "Tree_float_5_4_3_HalfFloat";
+    if (!has_tree || !float_tree) return true;  // other trees are never read (float grids only)
+    const int64_t tree_at = in_.pos();
+    int32_t buffers = 0;
+    if (!Get(&buffers, "buffer count")) return false;
+    if (buffers != 1) return Fail(tree_at, where + " has " + std::to_string(buffers) + " buffers");
+    float background = 0;
+    uint32_t tiles = 0, children = 0;
+    const int64_t counts_at = in_.pos() + 4;
+    if (!Get(&background, "background") || !Get(&tiles, "root counts") ||
+        !Get(&children, "root counts"))
+      return false;
+    // A tile is its origin, value and active flag; a child at least its origin and the two
+    // 32^3-bit masks of a 5-level internal node.
+    constexpr int64_t kTileBytes = 12 + 4 + 1, kChildBytes = 12 + 2 * 4096;
+    if (int64_t{tiles} * kTileBytes + int64_t{children} * kChildBytes > in_.left())
+      return Fail(counts_at, where + " root claims " + std::to_string(tiles) + " tiles and " +
+                                 std::to_string(children) + " children");
+    return true;
+  }
+
+  // Transform::read: the map's type name, then its fixed-size fields.
+  bool Transform(const std::string& where) {
+    const int64_t at = in_.pos();
+    std::string map;
+    if (!String(&map, "transform type", 256)) return false;
+    int64_t bytes = -1;
+    if (map == "AffineMap" || map == "UnitaryMap") bytes = 16 * 8;  // a 4x4 double matrix
+    if (map == "ScaleMap" || map == "UniformScaleMap") bytes = 5 * 24;  // five double vectors
+    if (map == "ScaleTranslateMap" || map == "UniformScaleTranslateMap") bytes = 6 * 24;
+    if (map == "TranslationMap") bytes = 24;
+    if (map == "NonlinearFrustumMap")
+      return Unsupported(at, where + ": non-linear (frustum) transforms are not supported");
+    if (bytes < 0) return Fail(at, where + " has an unknown transform '" + map + "'");
+    return in_.Skip(bytes) || Fail(at, where + " transform runs past its end");
+  }
+
+  WindowReader& in_;
+  bool has_offsets_ = true;
+  Defect defect_;
+};
+
+}  // namespace
+
+absl::Status CheckVdbStructure(const std::string& path) {
+  std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
+  if (f == nullptr) return absl::NotFoundError(path + ": cannot open");
+  if (fseeko(f.get(), 0, SEEK_END) != 0) return absl::DataLossError(path + ": cannot seek");
+  const int64_t size = ftello(f.get());
+  if (size < 0 || fseeko(f.get(), 0, SEEK_SET) != 0)
+    return absl::DataLossError(path + ": cannot seek");
+  WindowReader in(f.get(), size);
+  VdbStructure structure(&in);
+  if (structure.Check()) return absl::OkStatus();
+  const Defect& d = structure.defect();
+  if (d.unsupported) return absl::InvalidArgumentError(path + ": " + d.what);
+  return absl::DataLossError(path + ": corrupt OpenVDB file (byte " + std::to_string(d.at) +
+                             ": " + d.what + ")");
+}
+
+}  // namespace isostream
