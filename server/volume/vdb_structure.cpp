@@ -7,12 +7,15 @@
 #include <openvdb/Metadata.h>
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <cctype>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <map>
 #include <string>
+#include <vector>
 
 namespace isostream {
 namespace {
@@ -241,6 +244,9 @@ class VdbStructure {
                                     " lie outside the file");
       if (!in_.Seek(grid_pos)) return Fail(grid_pos, where);
       in_.SetEnd(topology_end);  // the metadata, transform and topology come before it
+      grid_end_ = end_pos;
+    } else {
+      grid_end_ = in_.size();
     }
     const bool ok = GridBody(type, !instance, where);
     in_.SetEnd(in_.size());
@@ -275,7 +281,119 @@ class VdbStructure {
     if (int64_t{tiles} * kTileBytes + int64_t{children} * kChildBytes > in_.left())
       return Fail(counts_at, where + " root claims " + std::to_string(tiles) + " tiles and " +
                                  std::to_string(children) + " children");
+    compression_ = compression;
+    half_ = type.size() > std::strlen("Tree_float_5_4_3");
+    return Tree(tiles, children, where);
+  }
+
+  // The root's tiles and children, every node below them, and then every leaf's values.
+  // OpenVDB reads the values of leaves in the order of the root's std::map<Coord> (a later
+  // entry at the same origin replacing an earlier one), so that is mirrored here.
+  bool Tree(uint32_t tiles, uint32_t children, const std::string& where) {
+    std::map<std::array<int32_t, 3>, int> table;  // origin -> child (-1: a tile)
+    for (uint32_t t = 0; t < tiles; ++t) {
+      std::array<int32_t, 3> origin;
+      if (!Get(&origin, "root tile") || !in_.Skip(5)) return Fail(in_.pos(), where + " root tile");
+      table[origin] = -1;
+    }
+    std::vector<std::vector<Mask>> leaves(children);  // per root child, its leaves' masks
+    for (uint32_t c = 0; c < children; ++c) {
+      std::array<int32_t, 3> origin;
+      if (!Get(&origin, "root child origin") || !Internal(5, &leaves[c], where)) return false;
+      table[origin] = int(c);
+    }
+    if (has_offsets_ && in_.pos() != in_.end())
+      return Fail(in_.pos(), where + " topology ends " + std::to_string(in_.end() - in_.pos()) +
+                                 " bytes before its values");
+    in_.SetEnd(grid_end_);
+    for (const auto& [origin, child] : table) {
+      if (child < 0) continue;
+      for (const Mask& topology : leaves[size_t(child)]) {
+        const int64_t at = in_.pos();
+        Mask mask;
+        if (!in_.Read(mask.data(), int64_t(mask.size())))
+          return Fail(at, where + " leaf values run past the end");
+        if (mask != topology) return Fail(at, where + " leaf mask differs from its topology");
+        if (!Values(512, Ones(mask.data(), mask.size()), mask.size(), where)) return false;
+      }
+    }
     return true;
+  }
+
+  using Mask = std::array<unsigned char, 64>;  // a leaf's 8^3 value mask
+
+  static uint32_t Ones(const unsigned char* bytes, size_t n) {
+    uint32_t ones = 0;
+    for (size_t i = 0; i < n; ++i) ones += uint32_t(__builtin_popcount(bytes[i]));
+    return ones;
+  }
+
+  // InternalNode::readTopology with 2^(3 log2) entries: child and value masks, the node's values,
+  // then its children (internal nodes of log2 4 below log2 5, leaves' masks below that).
+  bool Internal(int log2, std::vector<Mask>* leaves, const std::string& where) {
+    const size_t entries = size_t{1} << (3 * log2), mask_bytes = entries / 8;
+    std::vector<unsigned char> masks(2 * mask_bytes);
+    const int64_t at = in_.pos();
+    if (!in_.Read(masks.data(), int64_t(masks.size())))
+      return Fail(at, where + " node masks run past the end");
+    if (!Values(uint32_t(entries), Ones(masks.data() + mask_bytes, mask_bytes), mask_bytes, where))
+      return false;
+    for (size_t i = 0; i < entries; ++i) {
+      if (!((masks[i / 8] >> (i % 8)) & 1)) continue;
+      if (log2 == 5) {
+        if (!Internal(4, leaves, where)) return false;
+        continue;
+      }
+      Mask mask;
+      const int64_t leaf_at = in_.pos();
+      if (!in_.Read(mask.data(), int64_t(mask.size())))
+        return Fail(leaf_at, where + " leaf mask runs past the end");
+      leaves->push_back(mask);
+    }
+    return true;
+  }
+
+  // io::readCompressedValues for `count` values of a node whose value mask has `on` bits: a
+  // flag byte, inactive values and a selection mask as the flag says, then the values (only the
+  // active ones when the grid compresses by mask), raw, or as a Zip or Blosc chunk whose size
+  // field OpenVDB trusts for raw data (it reads that many bytes into a buffer of the expected
+  // size, then compares).
+  bool Values(uint32_t count, uint32_t on, size_t mask_bytes, const std::string& where) {
+    const int64_t at = in_.pos();
+    int8_t flag = 0;
+    if (!Get(&flag, "value flags")) return false;
+    const bool one_inactive = flag == 2 || flag == 4 || flag == 5, selection = flag >= 3 && flag <= 5;
+    if (!in_.Skip((one_inactive ? 4 : 0) + (flag == 5 ? 4 : 0) + (selection ? int64_t(mask_bytes) : 0)))
+      return Fail(at, where + " node values run past the end");
+    const bool by_mask = (compression_ & openvdb::io::COMPRESS_ACTIVE_MASK) && flag != 6;
+    const uint32_t stored = by_mask ? on : count;
+    if (half_ && stored == 0) return true;  // OpenVDB reads nothing then
+    const int64_t bytes = int64_t{stored} * (half_ ? 2 : 4);
+    if (!(compression_ & (openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_BLOSC)))
+      return in_.Skip(bytes) || Fail(at, where + " node values run past the end");
+    const int64_t size_at = in_.pos();
+    int64_t chunk = 0;
+    if (!Get(&chunk, "value chunk size")) return false;
+    if (chunk <= 0) {
+      if (chunk != -bytes)
+        return Fail(size_at, where + " holds a " + std::to_string(-chunk) + "-byte chunk where " +
+                                 std::to_string(bytes) + " bytes belong");
+      return in_.Skip(bytes) || Fail(size_at, where + " node values run past the end");
+    }
+    if (chunk > in_.left())
+      return Fail(size_at, where + " chunk of " + std::to_string(chunk) + " bytes runs past the end");
+    if (compression_ & openvdb::io::COMPRESS_BLOSC) {
+      unsigned char header[16];
+      uint32_t unpacked = 0;
+      if (chunk < 16 || !in_.Read(header, 16))
+        return Fail(size_at, where + " holds a damaged Blosc chunk");
+      std::memcpy(&unpacked, header + 4, 4);
+      if (int64_t{unpacked} != bytes)
+        return Fail(size_at, where + " Blosc chunk unpacks to " + std::to_string(unpacked) +
+                                 " bytes where " + std::to_string(bytes) + " belong");
+      chunk -= 16;
+    }
+    return in_.Skip(chunk) || Fail(size_at, where + " chunk runs past the end");
   }
 
   // Transform::read: the map's type name, then its fixed-size fields.
@@ -296,6 +414,9 @@ class VdbStructure {
 
   WindowReader& in_;
   bool has_offsets_ = true;
+  int64_t grid_end_ = 0;      // the current grid's
+  uint32_t compression_ = 0;  // the current grid's compression flags
+  bool half_ = false;         // the current grid stores its values as 16-bit floats
   Defect defect_;
 };
 

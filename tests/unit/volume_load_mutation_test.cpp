@@ -1,11 +1,12 @@
-// LoadVolume on damaged files: every header byte of a small NIfTI file, and every byte of a
-// small OpenVDB file's framing, overwritten in turn. Whatever a byte becomes, the loader returns either a
+// LoadVolume on damaged files: every header byte of a small NIfTI file, and bytes all through a
+// small OpenVDB file, overwritten in turn. Whatever a byte becomes, the loader returns either a
 // volume within the limits, all of whose samples are finite, or an error with a message; it
 // never crashes, hangs or allocates past the limits (the suite runs under a few seconds).
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -71,23 +72,30 @@ TEST(VolumeLoadMutation, EveryNiftiHeaderByte) {
   EXPECT_GT(outcomes.refused, 50);
 }
 
-// The framing CheckVdbStructure guards: everything OpenVDB reads before the first root child's
-// node masks (header, file metadata, grid descriptor, grid metadata, transform, root counts).
-// Damage inside node data below the root is not covered: OpenVDB's tree reader can write out
-// of bounds on it (a flipped child-mask bit did, in this test's first version).
-TEST(VolumeLoadMutation, EveryVdbFramingByte) {
+// Every byte of a small OpenVDB file's framing (header, metadata, grid descriptor, transform,
+// root counts) and bytes spread through its node topology and leaf values. OpenVDB alone
+// allocates and loops on damaged counts there, and writes past its buffers on a damaged chunk
+// size (a flipped child-mask bit misaligned one): CheckVdbStructure must catch all of it.
+TEST(VolumeLoadMutation, BytesThroughAVdbFile) {
   const std::string original = WriteVdb("mutation_source.vdb", {TestGrid("density", 1.0f)});
   const std::vector<unsigned char> good = ReadBytes(original);
-  // TestGrid's transform is a ScaleTranslateMap (six double vectors); the tree follows it: a
-  // buffer count, the background, and the root's tile and child counts.
-  const std::string map = "ScaleTranslateMap";
-  const auto found = std::search(good.begin(), good.end(), map.begin(), map.end());
-  ASSERT_NE(found, good.end());
-  const size_t framing_end = size_t(found - good.begin()) + map.size() + 6 * 24 + 4 + 4 + 8;
-  ASSERT_LT(framing_end, good.size());
+  auto find = [&](const std::string& s) {
+    const auto at = std::search(good.begin(), good.end(), s.begin(), s.end());
+    EXPECT_NE(at, good.end()) << s;
+    return size_t(at - good.begin());
+  };
+  // The descriptor's grid type is followed by an empty instance parent name and the grid,
+  // block and end offsets; TestGrid's transform (six double vectors) by the buffer count, the
+  // background and the root's two counts.
+  const size_t type_at = find("Tree_float_5_4_3");
+  int64_t block_pos = 0;
+  std::memcpy(&block_pos, good.data() + type_at + 16 + 4 + 8, 8);
+  const size_t framing_end = find("ScaleTranslateMap") + 17 + 6 * 24 + 4 + 4 + 8;
+  ASSERT_LT(framing_end, size_t(block_pos));
+  ASSERT_LT(size_t(block_pos), good.size());
   const std::string path = ScratchPath("mutated.vdb");
   Outcomes outcomes;
-  for (size_t at = 0; at < framing_end; ++at)
+  auto mutate = [&](size_t at) {
     for (unsigned char b : Replacements(good[at])) {
       if (b == good[at]) continue;
       std::vector<unsigned char> bytes = good;
@@ -96,8 +104,10 @@ TEST(VolumeLoadMutation, EveryVdbFramingByte) {
       outcomes.Check(LoadVolume(path, kLimits), "byte " + std::to_string(at) + " = " +
                                                     std::to_string(b));
     }
-  // The UUID's hex digits, library versions and metadata values load; lengths, counts,
-  // offsets and type names do not.
+  };
+  for (size_t at = 0; at < framing_end; ++at) mutate(at);
+  for (size_t at = framing_end; at < size_t(block_pos); at += 41) mutate(at);  // node masks
+  for (size_t at = size_t(block_pos); at < good.size(); at += 5) mutate(at);  // leaf values
   EXPECT_GT(outcomes.loaded, 300);
   EXPECT_GT(outcomes.refused, 1000);
 }
