@@ -4,15 +4,18 @@
 // on x86 and ARM.
 #include "server/volume/vdb_structure.h"
 
+#include <fcntl.h>
 #include <openvdb/Metadata.h>
 #include <openvdb/openvdb.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cctype>
 #include <cstdint>
-#include <cstdio>
 #include <cstring>
-#include <memory>
 #include <map>
 #include <string>
 #include <vector>
@@ -27,10 +30,13 @@ struct Defect {
   bool unsupported = false;
 };
 
-// Reads a file piece by piece inside a window [pos, end), never past it.
+// Reads a mapped file inside a window [pos, end), never past it. The tree walk reads a few
+// bytes per leaf and skips its values: mapped, only the pages holding what it reads are
+// touched (a stdio seek per leaf dropped its buffer every time: a second per 430 MB file, and
+// copying the file through a buffer took 0.3 s).
 class WindowReader {
  public:
-  WindowReader(FILE* f, int64_t size) : f_(f), size_(size), end_(size) {}
+  WindowReader(const unsigned char* data, int64_t size) : data_(data), size_(size), end_(size) {}
 
   int64_t pos() const { return pos_; }
   int64_t left() const { return end_ - pos_; }
@@ -38,26 +44,24 @@ class WindowReader {
   int64_t end() const { return end_; }
   void SetEnd(int64_t end) { end_ = end; }
   bool Seek(int64_t at) {
-    if (at < 0 || at > end_ || fseeko(f_, at, SEEK_SET) != 0) return false;
+    if (at < 0 || at > end_) return false;
     pos_ = at;
     return true;
   }
+  bool Skip(int64_t n) { return n >= 0 && n <= left() && Seek(pos_ + n); }
   bool Read(void* out, int64_t n) {
-    if (n < 0 || n > left() || std::fread(out, 1, size_t(n), f_) != size_t(n)) return false;
+    if (n < 0 || n > left()) return false;
+    if (n > 0) std::memcpy(out, data_ + pos_, size_t(n));
     pos_ += n;
     return true;
   }
-  bool Skip(int64_t n) { return n >= 0 && n <= left() && Seek(pos_ + n); }
   template <typename T>
   bool Get(T* v) {
-    unsigned char b[sizeof(T)];
-    if (!Read(b, sizeof(T))) return false;
-    std::memcpy(v, b, sizeof(T));
-    return true;
+    return Read(v, sizeof(T));
   }
 
  private:
-  FILE* f_;
+  const unsigned char* data_;
   int64_t size_;
   int64_t end_;
   int64_t pos_ = 0;
@@ -215,10 +219,19 @@ class VdbStructure {
       if (int64_t{uncompressed} > int64_t{count} * element + 64)
         return Fail(size_at + 4, where + " would unpack to " + std::to_string(uncompressed) +
                                      " bytes");
+      if (!BloscSizeMatches(blosc, compressed)) return Fail(size_at, where + " is damaged");
       if (!in_.Skip(int64_t{compressed} - int64_t{sizeof(blosc)}))
         return Fail(size_at, where + " is short");
     }
     return true;
+  }
+
+  // Blosc trusts its header's compressed size (bytes 12-15) and reads that far: it must be the
+  // size of the buffer OpenVDB hands it.
+  static bool BloscSizeMatches(const unsigned char* header, int64_t buffer_bytes) {
+    uint32_t compressed = 0;
+    std::memcpy(&compressed, header + 12, 4);
+    return int64_t{compressed} == buffer_bytes;
   }
 
   // GridDescriptor::read, then the grid at its offsets (or inline, in a stream-written file).
@@ -322,10 +335,19 @@ class VdbStructure {
 
   using Mask = std::array<unsigned char, 64>;  // a leaf's 8^3 value mask
 
+  // Set bits in n bytes (a multiple of 8), a word at a time: the baseline x86-64 target has no
+  // popcount instruction, and the library call per byte was most of the walk's time.
   static uint32_t Ones(const unsigned char* bytes, size_t n) {
-    uint32_t ones = 0;
-    for (size_t i = 0; i < n; ++i) ones += uint32_t(__builtin_popcount(bytes[i]));
-    return ones;
+    uint64_t ones = 0;
+    for (size_t i = 0; i < n; i += 8) {
+      uint64_t w;
+      std::memcpy(&w, bytes + i, 8);
+      w -= (w >> 1) & 0x5555555555555555ull;
+      w = (w & 0x3333333333333333ull) + ((w >> 2) & 0x3333333333333333ull);
+      w = (w + (w >> 4)) & 0x0f0f0f0f0f0f0f0full;
+      ones += (w * 0x0101010101010101ull) >> 56;
+    }
+    return uint32_t(ones);
   }
 
   // InternalNode::readTopology with 2^(3 log2) entries: child and value masks, the node's values,
@@ -339,6 +361,10 @@ class VdbStructure {
     if (!Values(uint32_t(entries), Ones(masks.data() + mask_bytes, mask_bytes), mask_bytes, where))
       return false;
     for (size_t i = 0; i < entries; ++i) {
+      if (masks[i / 8] == 0) {  // most of a sparse node's mask
+        i += 7;
+        continue;
+      }
       if (!((masks[i / 8] >> (i % 8)) & 1)) continue;
       if (log2 == 5) {
         if (!Internal(4, leaves, where)) return false;
@@ -388,6 +414,8 @@ class VdbStructure {
       if (chunk < 16 || !in_.Read(header, 16))
         return Fail(size_at, where + " holds a damaged Blosc chunk");
       std::memcpy(&unpacked, header + 4, 4);
+      if (!BloscSizeMatches(header, chunk))
+        return Fail(size_at, where + " holds a Blosc chunk of another size than its field");
       if (int64_t{unpacked} != bytes)
         return Fail(size_at, where + " Blosc chunk unpacks to " + std::to_string(unpacked) +
                                  " bytes where " + std::to_string(bytes) + " belong");
@@ -423,15 +451,22 @@ class VdbStructure {
 }  // namespace
 
 absl::Status CheckVdbStructure(const std::string& path) {
-  std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
-  if (f == nullptr) return absl::NotFoundError(path + ": cannot open");
-  if (fseeko(f.get(), 0, SEEK_END) != 0) return absl::DataLossError(path + ": cannot seek");
-  const int64_t size = ftello(f.get());
-  if (size < 0 || fseeko(f.get(), 0, SEEK_SET) != 0)
-    return absl::DataLossError(path + ": cannot seek");
-  WindowReader in(f.get(), size);
+  const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return absl::NotFoundError(path + ": cannot open");
+  struct stat st;
+  if (fstat(fd, &st) != 0) {
+    close(fd);
+    return absl::DataLossError(path + ": cannot read its size");
+  }
+  const int64_t size = st.st_size;
+  void* map = size > 0 ? mmap(nullptr, size_t(size), PROT_READ, MAP_PRIVATE, fd, 0) : nullptr;
+  close(fd);  // the mapping keeps the file
+  if (map == MAP_FAILED) return absl::DataLossError(path + ": cannot map it");
+  WindowReader in(static_cast<const unsigned char*>(map), size);
   VdbStructure structure(&in);
-  if (structure.Check()) return absl::OkStatus();
+  const bool sound = structure.Check();
+  if (map != nullptr) munmap(map, size_t(size));
+  if (sound) return absl::OkStatus();
   const Defect& d = structure.defect();
   if (d.unsupported) return absl::InvalidArgumentError(path + ": " + d.what);
   return absl::DataLossError(path + ": corrupt OpenVDB file (byte " + std::to_string(d.at) +
