@@ -2,8 +2,10 @@
 // from a config file, a short frame deadline, an idle timeout, TLS. Each suite starts its own
 // daemon on 127.0.0.1 (daemon_fixture.h); every wait is bounded.
 #include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
 
 #include <atomic>
+#include <cstring>
 #include <fstream>
 #include <iterator>
 #include <thread>
@@ -79,15 +81,36 @@ TEST_F(GuardedDaemon, SigtermFinishesTheFrameInFlightAndExitsZero) {
   EXPECT_TRUE(fetched.ok()) << fetched;
 }
 
-// A daemon with a JSON config: a catalogue (so generator specs are refused), small chunks, and
-// no retained frames.
+// A small OpenVDB file whose grid type name claims 2 GB (OpenVDB alone would allocate and fill
+// that much before failing); returns its path.
+std::string WriteDamagedVdb(const std::string& dir) {
+  openvdb::initialize();
+  auto grid = openvdb::FloatGrid::create(0.0f);
+  grid->setName("density");
+  grid->tree().fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(7)), 1.0f, true);
+  const std::string path = dir + "/damaged.vdb";
+  openvdb::io::File(path).write({grid});
+  std::ifstream in(path, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t type = bytes.find("Tree_float_5_4_3");
+  EXPECT_NE(type, std::string::npos);
+  const uint32_t claimed = 0x7f000000u;
+  std::memcpy(&bytes[type - 4], &claimed, 4);
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+  return path;
+}
+
+// A daemon with a JSON config: a catalogue (so generator specs are refused) with one damaged
+// file in it, small chunks, and no retained frames.
 class ConfiguredDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
     StartSuiteDaemon([](const std::string& dir) {
       const std::string config = dir + "/isostreamd.json";
       std::ofstream(config)
-          << R"({"threads": 2, "volumes": {"ball": "buckyball:65", "big": "buckyball:129"},
+          << R"({"threads": 2, "volumes": {"ball": "buckyball:65", "big": "buckyball:129",
+                                           "damaged": ")"
+          << WriteDamagedVdb(dir) << R"("},
           "frames": {"chunk_triangles": 4096, "first_chunk_triangles": 1024,
                      "max_queued_chunks": 4, "retain_mb": 0}})";
       return std::vector<std::string>{"--config", config, "--cache-dir", dir + "/cache"};
@@ -99,9 +122,10 @@ TEST_F(ConfiguredDaemon, ServesItsCatalogueOnly) {
   auto c = Connect();
   auto list = c->ListVolumes();
   ASSERT_TRUE(list.ok());
-  ASSERT_EQ(list->names_size(), 2);
+  ASSERT_EQ(list->names_size(), 3);
   EXPECT_EQ(list->names(0), "ball");
   EXPECT_EQ(list->names(1), "big");
+  EXPECT_EQ(list->names(2), "damaged");
   EXPECT_FALSE(list->generators_allowed());
   EXPECT_EQ(c->Fetch(MakeView("buckyball:65", 1, 0.01, glm::dvec3(2, 2, 2))).status().code(),
             absl::StatusCode::kNotFound);
@@ -113,6 +137,32 @@ TEST_F(ConfiguredDaemon, ServesItsCatalogueOnly) {
   EXPECT_EQ(sizes[0], 1024u);
   EXPECT_EQ(sizes[1], 2048u);
   for (size_t i = 2; i + 1 < sizes.size(); ++i) EXPECT_EQ(sizes[i], 4096u);
+}
+
+// Reads the suite's daemon log.
+std::string DaemonLog(const ScratchDir& scratch) {
+  std::ifstream log(scratch.path() + "/isostreamd.log");
+  return std::string((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+}
+
+// The damaged catalogue file is refused to whoever asks for it, every time (clients learn the
+// volume's name, the operator's log the byte at fault); the daemon goes on serving the rest.
+TEST_F(ConfiguredDaemon, ADamagedFileIsRefusedAndTheRestServes) {
+  auto c = Connect();
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    const auto damaged = c->Fetch(MakeView("damaged", 1, 0.0, glm::dvec3(2, 2, 2)));
+    ASSERT_FALSE(damaged.ok());
+    EXPECT_EQ(damaged.status().code(), absl::StatusCode::kDataLoss) << damaged.status();
+    EXPECT_NE(damaged.status().message().find("volume 'damaged'"), std::string::npos)
+        << damaged.status();
+  }
+  EXPECT_NE(DaemonLog(*scratch_).find("grid type claims 2130706432 bytes"), std::string::npos)
+      << DaemonLog(*scratch_);
+  const auto ball = c->Fetch(MakeView("ball", 1, 0.01, glm::dvec3(2, 2, 2)));
+  ASSERT_TRUE(ball.ok()) << ball.status();
+  EXPECT_GT(ball->mesh.triangle_count(), 0u);
+  auto health = c->CheckHealth();
+  EXPECT_TRUE(health.ok());
 }
 
 // With retain_mb 0 every view is extracted, the same mesh or not, and nothing is held.
@@ -137,18 +187,12 @@ TEST_F(ConfiguredDaemon, RetainsNothingWhenItsBudgetIsZero) {
   EXPECT_TRUE(s.Finish().ok());
 }
 
-// Reads the suite's daemon log.
-std::string DaemonLog(const ScratchDir& scratch) {
-  std::ifstream log(scratch.path() + "/isostreamd.log");
-  return std::string((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
-}
-
 // The catalogue is prepared at start (config `preload`, on by default), with no request for it.
 TEST_F(ConfiguredDaemon, PreparesItsCatalogueAtStart) {
   bool preloaded = false;
   for (int i = 0; i < 400 && !preloaded; ++i) {
     preloaded =
-        DaemonLog(*scratch_).find("preloaded 2 of 2 catalogue volumes") != std::string::npos;
+        DaemonLog(*scratch_).find("preloaded 2 of 3 catalogue volumes") != std::string::npos;
     if (!preloaded) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   EXPECT_TRUE(preloaded) << DaemonLog(*scratch_);
