@@ -194,6 +194,14 @@ TEST(VolumeLoadVdb, EveryWayOfWritingLoads) {
   half->setSaveFloatAsHalf(true);
   expect_test_grid(WriteVdb("half.vdb", {half}), 0.25f);
 
+  // Tiles at the root (outside the active box: a tile of the root is 4096^3 voxels) and inside
+  // an internal node, beside the leaves.
+  auto tiled = TestGrid("tiled", 1.0f);
+  tiled->tree().addTile(3, openvdb::Coord(1 << 20), 5.0f, false);
+  tiled->tree().addTile(2, openvdb::Coord(-(1 << 16)), 6.0f, false);
+  ASSERT_EQ(tiled->tree().root().getTableSize(), tiled->tree().root().childCount() + 1);
+  expect_test_grid(WriteVdb("tiled.vdb", {tiled}), 0);
+
   auto parent = TestGrid("parent", 1.0f);
   auto instance = parent->copyGrid();  // shares the tree: written as an instance
   instance->setName("instance");
@@ -206,15 +214,20 @@ TEST(VolumeLoadVdb, EveryWayOfWritingLoads) {
   meta.insertMeta("matrix", openvdb::Mat4DMetadata(openvdb::Mat4d::identity()));
   meta.insertMeta("empty", openvdb::StringMetadata(""));
   for (const uint32_t compression : {uint32_t{openvdb::io::COMPRESS_NONE},
+                                     uint32_t{openvdb::io::COMPRESS_ACTIVE_MASK},
                                      uint32_t{openvdb::io::COMPRESS_ZIP} |
-                                         uint32_t{openvdb::io::COMPRESS_ACTIVE_MASK}}) {
-    const std::string path = ScratchPath("meta_" + std::to_string(compression) + ".vdb");
-    openvdb::io::File file(path);
-    file.setCompression(compression);
-    file.write({TestGrid("density", 1.0f)}, meta);
-    file.close();
-    expect_test_grid(path, 0);
-  }
+                                         uint32_t{openvdb::io::COMPRESS_ACTIVE_MASK}})
+    for (const bool as_half : {false, true}) {
+      const std::string path = ScratchPath("meta_" + std::to_string(compression) +
+                                           (as_half ? "_half" : "") + ".vdb");
+      auto grid = TestGrid("density", 1.0f);
+      grid->setSaveFloatAsHalf(as_half);
+      openvdb::io::File file(path);
+      file.setCompression(compression);
+      file.write({grid}, meta);
+      file.close();
+      expect_test_grid(path, as_half ? 0.25f : 0);
+    }
 
   const std::string stream_path = ScratchPath("stream.vdb");
   {
