@@ -25,6 +25,12 @@ constexpr VolumeLimits kLimits{64, int64_t{64} * 64 * 64};
 struct Outcomes {
   int loaded = 0, refused = 0;
 
+  auto checker() {
+    return [this](const absl::StatusOr<VolumePtr>& result, const std::string& what) {
+      Check(result, what);
+    };
+  }
+
   void Check(const absl::StatusOr<VolumePtr>& result, const std::string& what) {
     if (!result.ok()) {
       ++refused;
@@ -51,6 +57,20 @@ std::vector<unsigned char> Replacements(unsigned char original) {
           static_cast<unsigned char>(original ^ 0x40)};
 }
 
+// Writes `good` to `path` with byte `at` overwritten by each of its replacements in turn, and
+// hands LoadVolume's answer for each to check(result, what), `what` naming the change.
+template <typename Check>
+void EachMutation(const std::vector<unsigned char>& good, size_t at, const std::string& path,
+                  const Check& check) {
+  for (unsigned char b : Replacements(good[at])) {
+    if (b == good[at]) continue;
+    std::vector<unsigned char> bytes = good;
+    bytes[at] = b;
+    WriteBytes(path, bytes);
+    check(LoadVolume(path, kLimits), "byte " + std::to_string(at) + " = " + std::to_string(b));
+  }
+}
+
 TEST(VolumeLoadMutation, EveryNiftiHeaderByte) {
   NiftiFile nf;
   nf.vox_offset = 360;  // an extension block too
@@ -58,15 +78,7 @@ TEST(VolumeLoadMutation, EveryNiftiHeaderByte) {
                                                                       false));
   const std::string path = ScratchPath("mutated.nii");
   Outcomes outcomes;
-  for (size_t at = 0; at < 360; ++at)
-    for (unsigned char b : Replacements(good[at])) {
-      if (b == good[at]) continue;
-      std::vector<unsigned char> bytes = good;
-      bytes[at] = b;
-      WriteBytes(path, bytes);
-      outcomes.Check(LoadVolume(path, kLimits), "byte " + std::to_string(at) + " = " +
-                                                    std::to_string(b));
-    }
+  for (size_t at = 0; at < 360; ++at) EachMutation(good, at, path, outcomes.checker());
   // Most of the header is unused (description, intent, ...): those loads must succeed.
   EXPECT_GT(outcomes.loaded, 1000);
   EXPECT_GT(outcomes.refused, 50);
@@ -85,23 +97,16 @@ TEST(VolumeLoadMutation, EveryByteOfAGzipNifti) {
   const std::string path = ScratchPath("mutated.nii.gz");
   Outcomes outcomes;
   for (size_t at = 0; at < good.size(); ++at)
-    for (unsigned char b : Replacements(good[at])) {
-      if (b == good[at]) continue;
-      std::vector<unsigned char> bytes = good;
-      bytes[at] = b;
-      WriteBytes(path, bytes);
-      const std::string what = "byte " + std::to_string(at) + " = " + std::to_string(b);
-      const absl::StatusOr<VolumePtr> v = LoadVolume(path, kLimits);
+    EachMutation(good, at, path, [&](const absl::StatusOr<VolumePtr>& v, const std::string& what) {
       outcomes.Check(v, what);
       // What loads is the file's own data: a damaged stream is never read as other samples.
-      if (v.ok()) {
-        ASSERT_EQ((*v)->dims, (*reference)->dims) << what;
-        for (int k = 0; k < nf.dims[2]; ++k)
-          for (int j = 0; j < nf.dims[1]; ++j)
-            for (int i = 0; i < nf.dims[0]; ++i)
-              ASSERT_EQ(Sample(**v, i, j, k), Sample(**reference, i, j, k)) << what;
-      }
-    }
+      if (!v.ok()) return;
+      ASSERT_EQ((*v)->dims, (*reference)->dims) << what;
+      for (int k = 0; k < nf.dims[2]; ++k)
+        for (int j = 0; j < nf.dims[1]; ++j)
+          for (int i = 0; i < nf.dims[0]; ++i)
+            ASSERT_EQ(Sample(**v, i, j, k), Sample(**reference, i, j, k)) << what;
+    });
   // The gzip header's time, flags and OS bytes are not checked by zlib; the rest is covered by
   // the deflate stream's own checks and the CRC.
   EXPECT_GT(outcomes.refused, int(good.size()) * 3);
@@ -130,16 +135,7 @@ TEST(VolumeLoadMutation, BytesThroughAVdbFile) {
   ASSERT_LT(size_t(block_pos), good.size());
   const std::string path = ScratchPath("mutated.vdb");
   Outcomes outcomes;
-  auto mutate = [&](size_t at) {
-    for (unsigned char b : Replacements(good[at])) {
-      if (b == good[at]) continue;
-      std::vector<unsigned char> bytes = good;
-      bytes[at] = b;
-      WriteBytes(path, bytes);
-      outcomes.Check(LoadVolume(path, kLimits), "byte " + std::to_string(at) + " = " +
-                                                    std::to_string(b));
-    }
-  };
+  auto mutate = [&](size_t at) { EachMutation(good, at, path, outcomes.checker()); };
   for (size_t at = 0; at < framing_end; ++at) mutate(at);
   for (size_t at = framing_end; at < size_t(block_pos); at += 41) mutate(at);  // node masks
   for (size_t at = size_t(block_pos); at < good.size(); at += 5) mutate(at);  // leaf values
