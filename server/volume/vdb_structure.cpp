@@ -91,8 +91,9 @@ class VdbStructure {
     if (grids < 0 || int64_t{grids} * 36 > in_.left())
       return Fail(count_at, "grid count " + std::to_string(grids) + " does not fit the file");
     if (!has_offsets_ && grids > 1)
-      return Unsupported(count_at, "several grids written without grid offsets (a stream): "
-                                   "save the file with openvdb::io::File");
+      return Unsupported(count_at,
+                         "several grids written without grid offsets (a stream): "
+                         "save the file with openvdb::io::File");
     for (int32_t g = 0; g < grids; ++g)
       if (!Grid(g)) return false;
     return true;
@@ -135,12 +136,12 @@ class VdbStructure {
     if (!Get(&version, "file version")) return false;
     if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION ||
         version > openvdb::OPENVDB_FILE_VERSION)
-      return Unsupported(8, "file format version " + std::to_string(version) + " (this build reads " +
-                                std::to_string(openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) +
-                                "-" + std::to_string(openvdb::OPENVDB_FILE_VERSION) +
-                                ": files written by OpenVDB 3 or later)");
-    if (!Get(&library[0], "library version") || !Get(&library[1], "library version"))
-      return false;
+      return Unsupported(
+          8, "file format version " + std::to_string(version) + " (this build reads " +
+                 std::to_string(openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) + "-" +
+                 std::to_string(openvdb::OPENVDB_FILE_VERSION) +
+                 ": files written by OpenVDB 3 or later)");
+    if (!Get(&library[0], "library version") || !Get(&library[1], "library version")) return false;
     uint8_t offsets = 0;
     if (!Get(&offsets, "grid offset flag")) return false;
     if (offsets > 1) return Fail(in_.pos() - 1, "grid offset flag is " + std::to_string(offsets));
@@ -227,8 +228,8 @@ class VdbStructure {
       uint32_t uncompressed = 0;
       std::memcpy(&uncompressed, blosc + 4, 4);
       if (int64_t{uncompressed} > int64_t{count} * element + 64)
-        return Fail(size_at + 4, where + " would unpack to " + std::to_string(uncompressed) +
-                                     " bytes");
+        return Fail(size_at + 4,
+                    where + " would unpack to " + std::to_string(uncompressed) + " bytes");
       if (!BloscSizeMatches(blosc, compressed)) return Fail(size_at, where + " is damaged");
       if (!in_.Skip(int64_t{compressed} - int64_t{sizeof(blosc)}))
         return Fail(size_at, where + " is short");
@@ -398,8 +399,10 @@ class VdbStructure {
     const int64_t at = in_.pos();
     int8_t flag = 0;
     if (!Get(&flag, "value flags")) return false;
-    const bool one_inactive = flag == 2 || flag == 4 || flag == 5, selection = flag >= 3 && flag <= 5;
-    if (!in_.Skip((one_inactive ? 4 : 0) + (flag == 5 ? 4 : 0) + (selection ? int64_t(mask_bytes) : 0)))
+    const bool one_inactive = flag == 2 || flag == 4 || flag == 5,
+               selection = flag >= 3 && flag <= 5;
+    if (!in_.Skip((one_inactive ? 4 : 0) + (flag == 5 ? 4 : 0) +
+                  (selection ? int64_t(mask_bytes) : 0)))
       return Fail(at, where + " node values run past the end");
     const bool by_mask = (compression_ & openvdb::io::COMPRESS_ACTIVE_MASK) && flag != 6;
     const uint32_t stored = by_mask ? on : count;
@@ -410,14 +413,15 @@ class VdbStructure {
     const int64_t size_at = in_.pos();
     int64_t chunk = 0;
     if (!Get(&chunk, "value chunk size")) return false;
-    if (chunk <= 0) {
+    if (chunk <= 0) {  // raw: minus its size
       if (chunk != -bytes)
-        return Fail(size_at, where + " holds a " + std::to_string(-chunk) + "-byte chunk where " +
-                                 std::to_string(bytes) + " bytes belong");
+        return Fail(size_at, where + " holds a raw chunk sized " + std::to_string(chunk) +
+                                 " where " + std::to_string(bytes) + " bytes belong");
       return in_.Skip(bytes) || Fail(size_at, where + " node values run past the end");
     }
     if (chunk > in_.left())
-      return Fail(size_at, where + " chunk of " + std::to_string(chunk) + " bytes runs past the end");
+      return Fail(size_at,
+                  where + " chunk of " + std::to_string(chunk) + " bytes runs past the end");
     if (compression_ & openvdb::io::COMPRESS_BLOSC) {
       unsigned char header[16];
       uint32_t unpacked = 0;
@@ -440,7 +444,7 @@ class VdbStructure {
     std::string map;
     if (!String(&map, "transform type", 256)) return false;
     int64_t bytes = -1;
-    if (map == "AffineMap" || map == "UnitaryMap") bytes = 16 * 8;  // a 4x4 double matrix
+    if (map == "AffineMap" || map == "UnitaryMap") bytes = 16 * 8;      // a 4x4 double matrix
     if (map == "ScaleMap" || map == "UniformScaleMap") bytes = 5 * 24;  // five double vectors
     if (map == "ScaleTranslateMap" || map == "UniformScaleTranslateMap") bytes = 6 * 24;
     if (map == "TranslationMap") bytes = 24;
@@ -475,8 +479,8 @@ absl::Status CheckVdbStructure(const std::string& path) {
   if (sound) return absl::OkStatus();
   const Defect& d = structure.defect();
   if (d.unsupported) return absl::InvalidArgumentError(path + ": " + d.what);
-  return absl::DataLossError(path + ": corrupt OpenVDB file (byte " + std::to_string(d.at) +
-                             ": " + d.what + ")");
+  return absl::DataLossError(path + ": corrupt OpenVDB file (byte " + std::to_string(d.at) + ": " +
+                             d.what + ")");
 }
 
 }  // namespace isostream

@@ -106,8 +106,8 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
                 "byte " + std::to_string(c.reported_at ? c.reported_at : c.at) + ":");
   }
   // A sound file this build does not read: an old format version.
-  ExpectError(LoadVolume(patched("old.vdb", 8, 221)), absl::StatusCode::kInvalidArgument,
-              "old.vdb", "file format version 221");
+  ExpectError(LoadVolume(patched("old.vdb", 8, 221)), absl::StatusCode::kInvalidArgument, "old.vdb",
+              "file format version 221");
 }
 
 TEST(VolumeLoadErrors, TruncatedData) {

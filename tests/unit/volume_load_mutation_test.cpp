@@ -47,13 +47,17 @@ struct Outcomes {
     for (int k = 0; k < dims[2]; ++k)
       for (int j = 0; j < dims[1]; ++j)
         for (int i = 0; i < dims[0]; ++i)
-          ASSERT_TRUE(std::isfinite(Sample(v, i, j, k))) << what << " at " << i << "," << j << ","
-                                                         << k;
+          ASSERT_TRUE(std::isfinite(Sample(v, i, j, k)))
+              << what << " at " << i << "," << j << "," << k;
   }
 };
 
 std::vector<unsigned char> Replacements(unsigned char original) {
-  return {0x00, 0xff, 0x7f, 0x80, static_cast<unsigned char>(original ^ 0x01),
+  return {0x00,
+          0xff,
+          0x7f,
+          0x80,
+          static_cast<unsigned char>(original ^ 0x01),
           static_cast<unsigned char>(original ^ 0x40)};
 }
 
@@ -74,8 +78,8 @@ void EachMutation(const std::vector<unsigned char>& good, size_t at, const std::
 TEST(VolumeLoadMutation, EveryNiftiHeaderByte) {
   NiftiFile nf;
   nf.vox_offset = 360;  // an extension block too
-  const std::vector<unsigned char> good = Concat(nf.Header(), Samples(Type::kFloat32, nf.dims,
-                                                                      false));
+  const std::vector<unsigned char> good =
+      Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false));
   const std::string path = ScratchPath("mutated.nii");
   Outcomes outcomes;
   for (size_t at = 0; at < 360; ++at) EachMutation(good, at, path, outcomes.checker());
@@ -138,7 +142,7 @@ TEST(VolumeLoadMutation, BytesThroughAVdbFile) {
   auto mutate = [&](size_t at) { EachMutation(good, at, path, outcomes.checker()); };
   for (size_t at = 0; at < framing_end; ++at) mutate(at);
   for (size_t at = framing_end; at < size_t(block_pos); at += 41) mutate(at);  // node masks
-  for (size_t at = size_t(block_pos); at < good.size(); at += 5) mutate(at);  // leaf values
+  for (size_t at = size_t(block_pos); at < good.size(); at += 5) mutate(at);   // leaf values
   EXPECT_GT(outcomes.loaded, 300);
   EXPECT_GT(outcomes.refused, 1000);
 }

@@ -213,13 +213,12 @@ TEST(VolumeLoadVdb, EveryWayOfWritingLoads) {
   meta.insertMeta("frame", openvdb::Int64Metadata(42));
   meta.insertMeta("matrix", openvdb::Mat4DMetadata(openvdb::Mat4d::identity()));
   meta.insertMeta("empty", openvdb::StringMetadata(""));
-  for (const uint32_t compression : {uint32_t{openvdb::io::COMPRESS_NONE},
-                                     uint32_t{openvdb::io::COMPRESS_ACTIVE_MASK},
-                                     uint32_t{openvdb::io::COMPRESS_ZIP} |
-                                         uint32_t{openvdb::io::COMPRESS_ACTIVE_MASK}})
+  for (const uint32_t compression :
+       {uint32_t{openvdb::io::COMPRESS_NONE}, uint32_t{openvdb::io::COMPRESS_ACTIVE_MASK},
+        uint32_t{openvdb::io::COMPRESS_ZIP} | uint32_t{openvdb::io::COMPRESS_ACTIVE_MASK}})
     for (const bool as_half : {false, true}) {
-      const std::string path = ScratchPath("meta_" + std::to_string(compression) +
-                                           (as_half ? "_half" : "") + ".vdb");
+      const std::string path =
+          ScratchPath("meta_" + std::to_string(compression) + (as_half ? "_half" : "") + ".vdb");
       auto grid = TestGrid("density", 1.0f);
       grid->setSaveFloatAsHalf(as_half);
       openvdb::io::File file(path);
