@@ -96,12 +96,48 @@ class VdbStructure {
                          "save the file with openvdb::io::File");
     for (int32_t g = 0; g < grids; ++g)
       if (!Grid(g)) return false;
-    return true;
+    return Reachable(count_at);
   }
 
   const Defect& defect() const { return defect_; }
 
  private:
+  // What a grid descriptor and its metadata say, for the rules across grids.
+  struct GridEntry {
+    std::string unique_name, name, type, parent;  // name: the unique name without its suffix
+    bool is_float = false;
+    bool has_name_meta = false;
+    std::string name_meta;  // the grid's "name" metadata
+  };
+
+  // Only float trees are walked, so no other tree may ever be read: OpenVDB reads every grid of
+  // a file without offsets, an instance's parent whatever its type, and the first grid of a
+  // name (the loader asks for the chosen grid by the name in its metadata).
+  bool Reachable(int64_t at) {
+    for (size_t i = 0; i < grids_.size(); ++i) {
+      const GridEntry& g = grids_[i];
+      const std::string where = "grid " + std::to_string(i);
+      if (!has_offsets_ && !g.is_float)
+        return Unsupported(at, "holds no float grid (" + g.type + ", written as a stream)");
+      if (g.has_name_meta && g.name_meta != g.name)
+        return Fail(at, where + " is named '" + g.name + "' in its descriptor and '" + g.name_meta +
+                            "' in its metadata");
+      if (!g.parent.empty()) {
+        bool found = false;
+        for (const GridEntry& p : grids_)
+          found |= p.unique_name == g.parent && p.parent.empty() && p.type == g.type;
+        if (!found) return Fail(at, where + " is an instance of no grid of its type");
+      }
+      for (size_t j = 0; j < i; ++j)
+        if (grids_[j].name == g.name && grids_[j].is_float != g.is_float)
+          return Unsupported(at, "grids " + std::to_string(j) + " and " + std::to_string(i) +
+                                     " are both named '" + g.name +
+                                     "', one float and one not (OpenVDB finds the first by "
+                                     "name): rename one");
+    }
+    return true;
+  }
+
   bool Fail(int64_t at, std::string what) {
     defect_ = {at, std::move(what), false};
     return false;
@@ -117,11 +153,11 @@ class VdbStructure {
   }
 
   // OpenVDB's string: a uint32 length, then the bytes.
-  bool String(std::string* out, const char* what, uint32_t max_length) {
+  bool String(std::string* out, const char* what) {
     const int64_t at = in_.pos();
     uint32_t length = 0;
     if (!Get(&length, what)) return false;
-    if (length > max_length || int64_t{length} > in_.left())
+    if (int64_t{length} > in_.left())
       return Fail(at, std::string(what) + " claims " + std::to_string(length) + " bytes");
     out->resize(length);
     return length == 0 || in_.Read(out->data(), length) || Fail(at, what);
@@ -168,8 +204,7 @@ class VdbStructure {
       return Fail(at, std::string(what) + " claims " + std::to_string(count) + " entries");
     for (uint32_t i = 0; i < count; ++i) {
       std::string name, type;
-      if (!String(&name, "metadata name", 1u << 16) || !String(&type, "metadata type", 256))
-        return false;
+      if (!String(&name, "metadata name") || !String(&type, "metadata type")) return false;
       if (!MetadataValue(name, type)) return false;
     }
     return true;
@@ -184,6 +219,11 @@ class VdbStructure {
       return Fail(at, where + " claims " + std::to_string(bytes) + " bytes");
     const int64_t value_end = in_.pos() + bytes;
     if (type == "__delayedload") return DelayedLoad(bytes, value_end, where);
+    if (name_meta_ != nullptr && name == "name" && type == "string") {
+      name_meta_->has_name_meta = true;
+      name_meta_->name_meta.resize(bytes);
+      return bytes == 0 || in_.Read(name_meta_->name_meta.data(), bytes) || Fail(at, where);
+    }
     if (type != "string" && openvdb::Metadata::isRegisteredType(type)) {
       // A typed value is read at its type's size whatever the size field says: a mismatch
       // would shift every read after it.
@@ -227,7 +267,8 @@ class VdbStructure {
         return Fail(size_at, where + " holds a damaged compressed part");
       uint32_t uncompressed = 0;
       std::memcpy(&uncompressed, blosc + 4, 4);
-      if (int64_t{uncompressed} > int64_t{count} * element + 64)
+      // OpenVDB pads an input of 48-127 bytes to 128 before compressing it.
+      if (int64_t{uncompressed} > std::max<int64_t>(int64_t{count} * element, 128) + 64)
         return Fail(size_at + 4,
                     where + " would unpack to " + std::to_string(uncompressed) + " bytes");
       if (!BloscSizeMatches(blosc, compressed)) return Fail(size_at, where + " is damaged");
@@ -249,8 +290,8 @@ class VdbStructure {
   bool Grid(int32_t index) {
     const std::string where = "grid " + std::to_string(index);
     std::string unique_name, type, parent;
-    if (!String(&unique_name, "grid name", 1u << 16) || !String(&type, "grid type", 256) ||
-        !String(&parent, "instance parent name", 1u << 16))
+    if (!String(&unique_name, "grid name") || !String(&type, "grid type") ||
+        !String(&parent, "instance parent name"))
       return false;
     const int64_t offsets_at = in_.pos();
     int64_t grid_pos = 0, block_pos = 0, end_pos = 0;
@@ -258,7 +299,23 @@ class VdbStructure {
         !Get(&end_pos, "grid offsets"))
       return false;
     const bool instance = !parent.empty();
+    GridEntry entry;
+    entry.unique_name = unique_name;
+    entry.name = unique_name.substr(0, unique_name.find('\x1e'));  // GridDescriptor::stripSuffix
+    entry.parent = parent;
+    const std::string half_suffix = "_HalfFloat";
+    entry.type =
+        type.size() > half_suffix.size() &&
+                type.compare(type.size() - half_suffix.size(), half_suffix.size(), half_suffix) == 0
+            ? type.substr(0, type.size() - half_suffix.size())
+            : type;
+    entry.is_float = entry.type == "Tree_float_5_4_3";
+    grids_.push_back(entry);
     if (has_offsets_) {
+      // OpenVDB writes a grid right after its descriptor, and io::Stream (the loader's reader
+      // for one-grid files) reads it from there, whatever the offset says.
+      if (grid_pos != in_.pos())
+        return Fail(offsets_at, where + " does not start right after its descriptor");
       // An instance has no tree, and its descriptor no block offset.
       const int64_t topology_end = instance ? end_pos : block_pos;
       if (grid_pos < in_.pos() || grid_pos > topology_end || topology_end > end_pos ||
@@ -286,9 +343,12 @@ class VdbStructure {
     if (compression > (openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK |
                        openvdb::io::COMPRESS_BLOSC))
       return Fail(at, where + " compression flags " + std::to_string(compression));
-    if (!MetaMap("grid metadata") || !Transform(where)) return false;
-    const bool float_tree = type == "Tree_float_5_4_3" || type == "Tree_float_5_4_3_HalfFloat";
-    if (!has_tree || !float_tree) return true;  // other trees are never read (float grids only)
+    name_meta_ = &grids_.back();
+    const bool described = MetaMap("grid metadata");
+    name_meta_ = nullptr;
+    if (!described || !Transform(where)) return false;
+    // Other trees are never read (Reachable): the loader reads float grids only.
+    if (!has_tree || !grids_.back().is_float) return true;
     const int64_t tree_at = in_.pos();
     int32_t buffers = 0;
     if (!Get(&buffers, "buffer count")) return false;
@@ -438,27 +498,33 @@ class VdbStructure {
     return in_.Skip(chunk) || Fail(size_at, where + " chunk runs past the end");
   }
 
-  // Transform::read: the map's type name, then its fixed-size fields.
-  bool Transform(const std::string& where) {
+  // Transform::read: the map's type name, then its fields. A frustum map holds a box, its taper
+  // and depth, then a second map (linear, or OpenVDB would refuse it: at most one level here).
+  // The loader refuses non-linear transforms on the grid it reads; other grids may have them.
+  bool Transform(const std::string& where, int depth = 0) {
     const int64_t at = in_.pos();
     std::string map;
-    if (!String(&map, "transform type", 256)) return false;
+    if (!String(&map, "transform type")) return false;
     int64_t bytes = -1;
     if (map == "AffineMap" || map == "UnitaryMap") bytes = 16 * 8;      // a 4x4 double matrix
     if (map == "ScaleMap" || map == "UniformScaleMap") bytes = 5 * 24;  // five double vectors
     if (map == "ScaleTranslateMap" || map == "UniformScaleTranslateMap") bytes = 6 * 24;
     if (map == "TranslationMap") bytes = 24;
-    if (map == "NonlinearFrustumMap")
-      return Unsupported(at, where + ": non-linear (frustum) transforms are not supported");
+    if (map == "NonlinearFrustumMap" && depth == 0) {
+      return (in_.Skip(48 + 16) || Fail(at, where + " transform runs past its end")) &&
+             Transform(where, depth + 1);
+    }
     if (bytes < 0) return Fail(at, where + " has an unknown transform '" + map + "'");
     return in_.Skip(bytes) || Fail(at, where + " transform runs past its end");
   }
 
   WindowReader& in_;
   bool has_offsets_ = true;
-  int64_t grid_end_ = 0;      // the current grid's
-  uint32_t compression_ = 0;  // the current grid's compression flags
-  bool half_ = false;         // the current grid stores its values as 16-bit floats
+  std::vector<GridEntry> grids_;
+  GridEntry* name_meta_ = nullptr;  // while reading a grid's metadata: where its name goes
+  int64_t grid_end_ = 0;            // the current grid's
+  uint32_t compression_ = 0;        // the current grid's compression flags
+  bool half_ = false;               // the current grid stores its values as 16-bit floats
   Defect defect_;
 };
 

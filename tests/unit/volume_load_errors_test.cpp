@@ -1,9 +1,12 @@
 // LoadVolume's refusals: every malformed, truncated, out-of-range or unsupported input is answered
 // with the right status and a message naming the input (files written by volume_files.h).
 #include <gtest/gtest.h>
+#include <openvdb/io/Stream.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
@@ -108,6 +111,63 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
   // A sound file this build does not read: an old format version.
   ExpectError(LoadVolume(patched("old.vdb", 8, 221)), absl::StatusCode::kInvalidArgument, "old.vdb",
               "file format version 221");
+}
+
+// Files whose grids OpenVDB would find or read other than the walk did: a grid that does not
+// start right after its descriptor (io::Stream reads it from there), an instance of a grid of
+// another type, a float and an int grid of one name (OpenVDB reads the first of a name), and a
+// stream-written non-float grid (read whole at open).
+TEST(VolumeLoadErrors, GridsTheWalkDoesNotVouchFor) {
+  openvdb::initialize();
+  // Gap: 12 bytes inserted after the descriptor, its three offsets moved past them.
+  std::vector<unsigned char> bytes =
+      ReadBytes(WriteVdb("gap_source.vdb", {TestGrid("density", 1.0f)}));
+  const std::string type = "Tree_float_5_4_3";
+  const size_t offsets =
+      size_t(std::search(bytes.begin(), bytes.end(), type.begin(), type.end()) - bytes.begin()) +
+      type.size() + 4;
+  int64_t pos[3];
+  std::memcpy(pos, bytes.data() + offsets, sizeof(pos));
+  for (int64_t& p : pos) p += 12;
+  std::memcpy(bytes.data() + offsets, pos, sizeof(pos));
+  bytes.insert(bytes.begin() + int64_t(offsets) + 24, 12, 0);
+  const std::string gap = ScratchPath("gap.vdb");
+  WriteBytes(gap, bytes);
+  ExpectError(LoadVolume(gap), absl::StatusCode::kDataLoss, "gap.vdb",
+              "does not start right after its descriptor");
+
+  // Instance: "instancegrid" shares "parentgrid"'s tree; its parent field is pointed at an int
+  // grid's name of the same length.
+  auto parent = TestGrid("parentgrid", 1.0f);
+  auto instance = parent->copyGrid();
+  instance->setName("instancegrid");
+  auto ints = openvdb::Int32Grid::create(0);
+  ints->setName("intgrid___");
+  ints->tree().setValue(openvdb::Coord(0), 1);
+  bytes = ReadBytes(WriteVdb("instance_source.vdb", {parent, instance, ints}));
+  const std::string inst = "instancegrid", par = "parentgrid";
+  const auto inst_at = std::search(bytes.begin(), bytes.end(), inst.begin(), inst.end());
+  const auto par_at = std::search(inst_at, bytes.end(), par.begin(), par.end());
+  ASSERT_NE(par_at, bytes.end());
+  std::memcpy(&*par_at, "intgrid___", 10);
+  const std::string wrong_parent = ScratchPath("wrong_parent.vdb");
+  WriteBytes(wrong_parent, bytes);
+  ExpectError(LoadVolume(wrong_parent + "#instancegrid"), absl::StatusCode::kDataLoss,
+              "wrong_parent.vdb", "is an instance of no grid of its type");
+
+  auto same = openvdb::Int32Grid::create(0);
+  same->setName("a");
+  same->tree().setValue(openvdb::Coord(0), 1);
+  ExpectError(LoadVolume(WriteVdb("same_name.vdb", {same, TestGrid("a", 1.0f)})),
+              absl::StatusCode::kInvalidArgument, "same_name.vdb", "both named 'a'");
+
+  const std::string stream = ScratchPath("int_stream.vdb");
+  {
+    std::ofstream out(stream, std::ios::binary);
+    openvdb::io::Stream(out).write({ints});
+  }
+  ExpectError(LoadVolume(stream), absl::StatusCode::kInvalidArgument, "int_stream.vdb",
+              "holds no float grid");
 }
 
 TEST(VolumeLoadErrors, TruncatedData) {

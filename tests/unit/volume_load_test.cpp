@@ -228,6 +228,31 @@ TEST(VolumeLoadVdb, EveryWayOfWritingLoads) {
       expect_test_grid(path, as_half ? 0.25f : 0);
     }
 
+  // Grids of 7 and of 49 leaves: OpenVDB pads their delayed-load metadata's 49-127 byte parts
+  // to 128 bytes before compressing them.
+  for (const int leaves : {7, 49}) {
+    auto row = openvdb::FloatGrid::create(0.0f);
+    row->setName("row");
+    for (int i = 0; i < leaves; ++i)
+      row->tree().setValue(openvdb::Coord(8 * i, i % 2, i % 2), 1.0f);
+    absl::StatusOr<VolumePtr> v =
+        LoadVolume(WriteVdb("row" + std::to_string(leaves) + ".vdb", {row}));
+    ASSERT_TRUE(v.ok()) << leaves << " leaves: " << v.status();
+    EXPECT_EQ((*v)->dims[0], 8 * (leaves - 1) + 1);
+  }
+
+  // A frustum transform on another grid, and names longer than 64 KiB.
+  auto frustum = openvdb::Vec3SGrid::create();
+  frustum->setName("velocity");
+  frustum->setTransform(openvdb::math::Transform::createFrustumTransform(
+      openvdb::BBoxd(openvdb::Vec3d(0), openvdb::Vec3d(16)), 0.5, 10.0, 1.0));
+  frustum->tree().setValue(openvdb::Coord(1), openvdb::Vec3s(1, 2, 3));
+  expect_test_grid(WriteVdb("frustum_beside.vdb", {frustum, TestGrid("density", 1.0f)}), 0);
+  const std::string long_name(70000, 'n');
+  auto named = TestGrid(long_name, 1.0f);
+  named->insertMeta(std::string(70000, 'm'), openvdb::Int32Metadata(1));
+  expect_test_grid(WriteVdb("long_names.vdb", {named}), 0);
+
   const std::string stream_path = ScratchPath("stream.vdb");
   {
     std::ofstream out(stream_path, std::ios::binary);
