@@ -36,9 +36,12 @@ bool HasVdbMagic(const std::string& path) {
   return got == 4 && magic == static_cast<uint32_t>(openvdb::OPENVDB_MAGIC);
 }
 
+// In 64 bits: CoordBBox::dim() overflows int32 for a box spanning more than half the index
+// range (a damaged file can place voxels anywhere).
 std::array<int64_t, 3> BoxDims(const openvdb::CoordBBox& box) {
-  const openvdb::Coord d = box.dim();
-  return {d.x(), d.y(), d.z()};
+  const openvdb::Coord lo = box.min(), hi = box.max();
+  return {int64_t{hi.x()} - lo.x() + 1, int64_t{hi.y()} - lo.y() + 1,
+          int64_t{hi.z()} - lo.z() + 1};
 }
 
 struct BoxScan {

@@ -284,6 +284,13 @@ TEST(VolumeLoadErrors, DimsAboveLimits) {
 
   const std::string vdb = WriteVdb("big.vdb", {TestGrid("density", 1.0f)});  // 10x9x12
   ExpectError(LoadVolume(vdb, limits), absl::StatusCode::kResourceExhausted, "big.vdb");
+  // Voxels 2^31 apart: the box's extent overflows 32-bit coordinates, and is still too big.
+  auto spread = openvdb::FloatGrid::create(0.0f);
+  spread->setName("spread");
+  spread->tree().setValue(openvdb::Coord(-(1 << 30)), 1.0f);
+  spread->tree().setValue(openvdb::Coord(1 << 30), 2.0f);
+  ExpectError(LoadVolume(WriteVdb("spread.vdb", {spread})), absl::StatusCode::kResourceExhausted,
+              "spread.vdb", "2147483649");
 
   ExpectError(LoadVolume("sphere:9", limits), absl::StatusCode::kResourceExhausted, "sphere:9");
   ExpectError(LoadVolume("noise:7", limits), absl::StatusCode::kResourceExhausted, "noise:7");
