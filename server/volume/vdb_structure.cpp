@@ -1,7 +1,7 @@
-// The framing check of OpenVDB files (vdb_structure.h). It follows OpenVDB's own read order
-// (io::Archive::readHeader, MetaMap::readMeta, GridDescriptor::read, Archive::readGrid,
-// Transform::read, RootNode::readTopology) for file versions 222-224, little-endian as written
-// on x86 and ARM.
+// The structure check of OpenVDB files (vdb_structure.h). It follows OpenVDB 10's own read
+// order (io::Archive::readHeader, MetaMap::readMeta, GridDescriptor::read, Archive::readGrid,
+// Transform::read, the Root/Internal/LeafNode readTopology and readBuffers,
+// io::readCompressedValues) for file versions 222-224, little-endian as written on x86 and ARM.
 #include "server/volume/vdb_structure.h"
 
 #include <fcntl.h>
