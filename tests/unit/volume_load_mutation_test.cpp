@@ -147,5 +147,22 @@ TEST(VolumeLoadMutation, BytesThroughAVdbFile) {
   EXPECT_GT(outcomes.refused, 1000);
 }
 
+// A file of two grids goes through OpenVDB's other reader (io::File: descriptors by offset,
+// metadata of every grid, then the chosen grid by name): bytes spread through the whole file,
+// both grids' descriptors, metadata and trees.
+TEST(VolumeLoadMutation, BytesThroughATwoGridVdbFile) {
+  auto labels = openvdb::Int32Grid::create(0);
+  labels->setName("labels");
+  labels->tree().fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(9)), 3, true);
+  const std::vector<unsigned char> good =
+      ReadBytes(WriteVdb("two_source.vdb", {labels, TestGrid("density", 1.0f)}));
+  const std::string path = ScratchPath("mutated_two.vdb");
+  Outcomes outcomes;
+  for (size_t at = 0; at < good.size(); at += at < 1024 ? 3 : 53)
+    EachMutation(good, at, path, outcomes.checker());
+  EXPECT_GT(outcomes.loaded, 100);
+  EXPECT_GT(outcomes.refused, 500);
+}
+
 }  // namespace
 }  // namespace isostream
