@@ -5,7 +5,6 @@
 #include <tbb/combinable.h>
 
 #include <cmath>
-#include <cstdio>
 #include <fstream>
 #include <limits>
 #include <mutex>
@@ -24,24 +23,11 @@ void InitializeOpenVdbOnce() {
   std::call_once(once, [] { openvdb::initialize(); });
 }
 
-// OpenVDB reports a foreign file and a damaged one with the same exception type; peeking at the
-// magic ourselves lets us say which it is.
-bool HasVdbMagic(const std::string& path) {
-  unsigned char b[4] = {0, 0, 0, 0};
-  FILE* f = std::fopen(path.c_str(), "rb");
-  if (f == nullptr) return false;
-  const size_t got = std::fread(b, 1, 4, f);
-  std::fclose(f);
-  const uint32_t magic = b[0] | (b[1] << 8) | (b[2] << 16) | (static_cast<uint32_t>(b[3]) << 24);
-  return got == 4 && magic == static_cast<uint32_t>(openvdb::OPENVDB_MAGIC);
-}
-
 // In 64 bits: CoordBBox::dim() overflows int32 for a box spanning more than half the index
 // range (a damaged file can place voxels anywhere).
 std::array<int64_t, 3> BoxDims(const openvdb::CoordBBox& box) {
   const openvdb::Coord lo = box.min(), hi = box.max();
-  return {int64_t{hi.x()} - lo.x() + 1, int64_t{hi.y()} - lo.y() + 1,
-          int64_t{hi.z()} - lo.z() + 1};
+  return {int64_t{hi.x()} - lo.x() + 1, int64_t{hi.y()} - lo.y() + 1, int64_t{hi.z()} - lo.z() + 1};
 }
 
 struct BoxScan {
@@ -100,10 +86,8 @@ BoxScan ScanBox(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& box) {
 absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string& path,
                                       const std::string& grid_name, const VolumeLimits& limits) {
   ISOSTREAM_RETURN_IF_ERROR(CheckInputFile(path));
-  if (!HasVdbMagic(path)) {
-    return absl::InvalidArgumentError(path + ": not an OpenVDB file (wrong magic number)");
-  }
   InitializeOpenVdbOnce();
+  // A foreign file is InvalidArgument, a damaged one DataLoss (OpenVDB reports both alike).
   ISOSTREAM_RETURN_IF_ERROR(CheckVdbStructure(path));
 
   openvdb::io::File file(path);

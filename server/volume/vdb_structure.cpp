@@ -19,6 +19,8 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/strip.h"
+
 namespace isostream {
 namespace {
 
@@ -165,9 +167,9 @@ class VdbStructure {
 
   bool Header() {
     unsigned char magic[8];
-    if (!in_.Read(magic, 8)) return Fail(0, "shorter than a header");
     const int64_t expected = openvdb::OPENVDB_MAGIC;
-    if (std::memcmp(magic, &expected, 8) != 0) return Fail(0, "wrong magic number");
+    if (!in_.Read(magic, 8) || std::memcmp(magic, &expected, 8) != 0)
+      return Unsupported(0, "not an OpenVDB file (wrong magic number)");
     uint32_t version = 0, library[2];
     if (!Get(&version, "file version")) return false;
     if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION ||
@@ -303,12 +305,7 @@ class VdbStructure {
     entry.unique_name = unique_name;
     entry.name = unique_name.substr(0, unique_name.find('\x1e'));  // GridDescriptor::stripSuffix
     entry.parent = parent;
-    const std::string half_suffix = "_HalfFloat";
-    entry.type =
-        type.size() > half_suffix.size() &&
-                type.compare(type.size() - half_suffix.size(), half_suffix.size(), half_suffix) == 0
-            ? type.substr(0, type.size() - half_suffix.size())
-            : type;
+    entry.type = std::string(absl::StripSuffix(type, "_HalfFloat"));  // as GridDescriptor::read
     entry.is_float = entry.type == "Tree_float_5_4_3";
     grids_.push_back(entry);
     if (has_offsets_) {
@@ -366,7 +363,7 @@ class VdbStructure {
       return Fail(counts_at, where + " root claims " + std::to_string(tiles) + " tiles and " +
                                  std::to_string(children) + " children");
     compression_ = compression;
-    half_ = type.size() > std::strlen("Tree_float_5_4_3");
+    half_ = type != grids_.back().type;  // the descriptor's type carried "_HalfFloat"
     return Tree(tiles, children, where);
   }
 

@@ -19,8 +19,8 @@
 namespace isostream {
 
 // OK if the structure is sound. Otherwise DataLoss naming the byte offset and what was wrong
-// there, or InvalidArgument for a well-formed file this loader will not read (a format version
-// before 222, a float and a non-float grid of one name, a stream-written file of several grids
+// there, or InvalidArgument for a file this loader will not read (not an OpenVDB file, a format
+// version before 222, a float and a non-float grid of one name, a stream-written file of several grids
 // or without a float grid). Messages start with PATH. OpenVDB must be initialised (its metadata
 // type registry is consulted).
 absl::Status CheckVdbStructure(const std::string& path);
