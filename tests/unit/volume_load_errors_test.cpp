@@ -63,8 +63,9 @@ TEST(VolumeLoadErrors, WrongMagic) {
   ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "garbage.vdb", "magic");
 }
 
-// Damaged counts and lengths in an OpenVDB file's framing are refused before OpenVDB reads them
-// (it would allocate what they claim, or loop on them): DataLoss naming the byte.
+// Each fault the structure walk knows, from the header to a leaf's value chunk, is refused before
+// OpenVDB reads the file (it would allocate what a count claims, loop on it, or overflow a
+// buffer): DataLoss naming the byte and the fault.
 TEST(VolumeLoadErrors, DamagedVdbFraming) {
   const std::vector<unsigned char> good =
       ReadBytes(WriteVdb("framing.vdb", {TestGrid("density", 1.0f)}));
@@ -90,7 +91,29 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
   };
   const size_t map = length_of("ScaleTranslateMap");
   const size_t root_tiles = map + 4 + 17 + 6 * 24 + 4 + 4;
+  // The descriptor: unique name, type, an empty instance parent name, then the grid, block and
+  // end offsets; the grid starts with its compression flags, and its metadata names it again.
+  const size_t offsets = length_of("Tree_float_5_4_3") + 4 + 16 + 4;
+  int64_t grid_pos = 0, block_pos = 0;
+  std::memcpy(&grid_pos, good.data() + offsets, 8);
+  std::memcpy(&block_pos, good.data() + offsets + 8, 8);
+  const std::string density = "density";
+  const size_t name_meta =
+      size_t(std::search(good.begin() + grid_pos, good.end(), density.begin(), density.end()) -
+             good.begin());
+  uint32_t leaf_mask = 0;
+  std::memcpy(&leaf_mask, good.data() + block_pos, 4);
+  const size_t grid_count = length_of("density") - 4;
   const Case cases[] = {
+      {"uuid.vdb", 24, 0x7a7a7a7au, "file UUID is malformed", 0},
+      {"offset_flag.vdb", 20, 2, "grid offset flag is 2", 0},
+      {"compression.vdb", size_t(grid_pos), 0xff, "compression flags 255", 0},
+      {"map_type.vdb", map + 4, 0x6c616358u, "unknown transform 'XcaleTranslateMap'", map},
+      {"buffers.vdb", map + 4 + 17 + 6 * 24, 2, "has 2 buffers", 0},
+      {"name_meta.vdb", name_meta, 0x736e6578u, "'density' in its descriptor and 'xensity'",
+       grid_count},
+      {"leaf_mask.vdb", size_t(block_pos), leaf_mask ^ 1u, "leaf mask differs from its topology",
+       0},
       {"string_length.vdb", length_of("file_compression"), 0x7f000000u, "metadata name claims", 0},
       {"value_size.vdb", length_of("file_bbox_max") + 4 + 13 + 4 + 5, 0x7f000000u,
        "'file_bbox_max' (vec3i) claims", 0},
@@ -104,6 +127,31 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
     const std::string path = patched(c.name, c.at, c.value);
+    ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, c.name, c.says);
+    ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss,
+                "byte " + std::to_string(c.reported_at ? c.reported_at : c.at) + ":");
+  }
+  // 64-bit fields: a grid's end past the file, and the first leaf's value chunk size (after its
+  // 64-byte mask and flag byte) made raw and wrong, or one byte off its Blosc header's.
+  int64_t chunk = 0;
+  std::memcpy(&chunk, good.data() + block_pos + 65, 8);
+  const struct {
+    const char* name;
+    size_t at;
+    int64_t value;
+    const char* says;
+    size_t reported_at;
+  } wide[] = {
+      {"end_pos.vdb", offsets + 16, int64_t(good.size()) + 1, "lie outside the file", offsets},
+      {"raw_chunk.vdb", size_t(block_pos) + 65, -1000, "holds a raw chunk sized -1000", 0},
+      {"blosc_chunk.vdb", size_t(block_pos) + 65, chunk + 1, "Blosc chunk of another size", 0},
+  };
+  for (const auto& c : wide) {
+    SCOPED_TRACE(c.name);
+    std::vector<unsigned char> bytes = good;
+    PutAt<int64_t>(bytes, c.at, c.value, false);
+    const std::string path = ScratchPath(c.name);
+    WriteBytes(path, bytes);
     ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, c.name, c.says);
     ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss,
                 "byte " + std::to_string(c.reported_at ? c.reported_at : c.at) + ":");
