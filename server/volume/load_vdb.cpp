@@ -1,10 +1,14 @@
 // OpenVDB files: one float grid becomes a Volume over its active bounding box.
 #include <openvdb/io/File.h>
 #include <openvdb/io/Stream.h>
+#include <fcntl.h>
 #include <openvdb/math/Maps.h>
 #include <tbb/combinable.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <mutex>
@@ -86,11 +90,30 @@ BoxScan ScanBox(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& box) {
 absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string& path,
                                       const std::string& grid_name, const VolumeLimits& limits) {
   ISOSTREAM_RETURN_IF_ERROR(CheckInputFile(path));
+  struct Closer {
+    int fd;
+    ~Closer() {
+      if (fd >= 0) close(fd);
+    }
+  } opened{open(path.c_str(), O_RDONLY | O_CLOEXEC)};
+  if (opened.fd < 0) {
+    return absl::PermissionDeniedError(path + ": cannot open: " + std::strerror(errno));
+  }
+  return LoadVdbOpenFile(opened.fd, spec, path, grid_name, limits);
+}
+
+absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
+                                          const std::string& path, const std::string& grid_name,
+                                          const VolumeLimits& limits) {
   InitializeOpenVdbOnce();
   // A foreign file is InvalidArgument, a damaged one DataLoss (OpenVDB reports both alike).
-  ISOSTREAM_RETURN_IF_ERROR(CheckVdbStructure(path));
+  ISOSTREAM_RETURN_IF_ERROR(CheckVdbStructure(fd, path));
 
-  openvdb::io::File file(path);
+  // OpenVDB opens files by name. Through the descriptor's /proc entry it reads the very file
+  // just checked, even if PATH has since been replaced (a catalogue updated by renaming a new
+  // file over the old one); by PATH it would read the new file unchecked.
+  const std::string checked_file = "/proc/self/fd/" + std::to_string(fd);
+  openvdb::io::File file(checked_file);
   try {
     // Delayed loading would defer reading (and its errors) to first access, past this edge.
     file.open(/*delayLoad=*/false);
@@ -148,7 +171,7 @@ absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string
       // bytes loads with garbage in its last voxels. Through our own stream the short read
       // shows (a single grid: the stream reads every grid, which is then just this one).
       file.close();
-      std::ifstream in(path, std::ios::binary);
+      std::ifstream in(checked_file, std::ios::binary);
       openvdb::io::Stream stream(in, /*delayLoad=*/false);
       const openvdb::GridPtrVecPtr grids = stream.getGrids();
       if (!in) return absl::DataLossError(where + ": truncated grid data");

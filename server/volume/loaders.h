@@ -14,6 +14,12 @@ namespace isostream {
 absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string& path,
                                       const std::string& grid_name, const VolumeLimits& limits);
 
+// The same from the file open as FD (read-only), which PATH named when it was opened: the
+// structure check and OpenVDB's reads see that one file whatever happens to PATH meanwhile.
+absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
+                                          const std::string& path, const std::string& grid_name,
+                                          const VolumeLimits& limits);
+
 // A single-file NIfTI-1 volume, gzip-compressed or not.
 absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::string& path,
                                         const VolumeLimits& limits);

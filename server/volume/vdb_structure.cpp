@@ -527,23 +527,24 @@ class VdbStructure {
 
 }  // namespace
 
-absl::Status CheckVdbStructure(const std::string& path) {
-  const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return absl::NotFoundError(path + ": cannot open");
+absl::Status CheckVdbStructure(int fd, const std::string& path) {
   struct stat st;
-  if (fstat(fd, &st) != 0) {
-    close(fd);
-    return absl::DataLossError(path + ": cannot read its size");
-  }
+  if (fstat(fd, &st) != 0) return absl::DataLossError(path + ": cannot read its size");
   WindowReader in(fd, int64_t(st.st_size));
   VdbStructure structure(&in);
-  const bool sound = structure.Check();
-  close(fd);
-  if (sound) return absl::OkStatus();
+  if (structure.Check()) return absl::OkStatus();
   const Defect& d = structure.defect();
   if (d.unsupported) return absl::InvalidArgumentError(path + ": " + d.what);
   return absl::DataLossError(path + ": corrupt OpenVDB file (byte " + std::to_string(d.at) + ": " +
                              d.what + ")");
+}
+
+absl::Status CheckVdbStructure(const std::string& path) {
+  const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return absl::NotFoundError(path + ": cannot open");
+  const absl::Status status = CheckVdbStructure(fd, path);
+  close(fd);
+  return status;
 }
 
 }  // namespace isostream

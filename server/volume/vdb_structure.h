@@ -18,11 +18,15 @@
 
 namespace isostream {
 
-// OK if the structure is sound. Otherwise DataLoss naming the byte offset and what was wrong
-// there, or InvalidArgument for a file this loader will not read (not an OpenVDB file, a format
-// version before 222, a float and a non-float grid of one name, a stream-written file of several grids
-// or without a float grid). Messages start with PATH. OpenVDB must be initialised (its metadata
-// type registry is consulted).
+// OK if the structure of the file open as FD (read-only; read with pread, so its offset is left
+// alone) is sound. Otherwise DataLoss naming the byte offset and what was wrong there, or
+// InvalidArgument for a file this loader will not read (not an OpenVDB file, a format version
+// before 222, a float and a non-float grid of one name, a stream-written file of several grids
+// or without a float grid). Messages start with PATH, the file's name. OpenVDB must be
+// initialised (its metadata type registry is consulted).
+absl::Status CheckVdbStructure(int fd, const std::string& path);
+
+// The same for the file at PATH.
 absl::Status CheckVdbStructure(const std::string& path);
 
 }  // namespace isostream

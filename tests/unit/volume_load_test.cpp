@@ -1,7 +1,9 @@
 // LoadVolume from files: round trips through real .vdb, .nii, .nii.gz and raw files written here
 // (volume_files.h); volume_load_errors_test.cpp has the inputs it refuses.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <openvdb/io/Stream.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <fstream>
@@ -10,6 +12,7 @@
 #include <vector>
 
 #include "server/volume/load.h"
+#include "server/volume/loaders.h"
 #include "volume_files.h"
 
 namespace isostream {
@@ -160,6 +163,40 @@ TEST(VolumeLoadVdb, FirstFloatGridAndNamedGrid) {
   absl::StatusOr<VolumePtr> v = LoadVolume(hashed + "#heat#2");
   ASSERT_TRUE(v.ok()) << v.status();
   ExpectError(LoadVolume(hashed + "#heat"), absl::StatusCode::kNotFound, "no grid named 'heat'");
+}
+
+// A catalogue file replaced by renaming a new one over its name, between the loader's opening
+// it and OpenVDB's reading it: the structure check and every read must see the file opened
+// (reopening by name would read the new file, and a damaged one unchecked).
+TEST(VolumeLoadVdb, ReadsTheFileItOpenedWhenItsNameIsReplaced) {
+  for (const int grids : {1, 2}) {  // one grid: read through a stream; two: by name
+    SCOPED_TRACE(grids);
+    const std::string path = ScratchPath("replaced" + std::to_string(grids) + ".vdb");
+    auto write = [&](const std::string& to, float scale) {
+      openvdb::GridPtrVec v;
+      v.push_back(TestGrid("density", scale));
+      if (grids == 2) v.push_back(TestGrid("other", -scale));
+      std::rename(WriteVdb("staged.vdb", v).c_str(), to.c_str());
+    };
+    write(path, 1.0f);
+    const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    ASSERT_GE(fd, 0);
+    for (const bool damaged : {false, true}) {
+      write(path, 2.0f);
+      if (damaged) {
+        std::vector<unsigned char> bytes = ReadBytes(path);
+        bytes.resize(bytes.size() * 2 / 3);
+        WriteBytes(path + ".new", bytes);
+        std::rename((path + ".new").c_str(), path.c_str());
+        ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, "corrupt OpenVDB file");
+      }
+      absl::StatusOr<VolumePtr> v = LoadVdbOpenFile(fd, path, path, "density", VolumeLimits{});
+      ASSERT_TRUE(v.ok()) << v.status();
+      EXPECT_EQ((*v)->dims, (std::array<int, 3>{10, 9, 12}));
+      EXPECT_EQ(Sample(**v, 9, 8, 11), 6 * 3 + 13 * 5 - 18 * 7);  // scale 1: the opened file
+    }
+    close(fd);
+  }
 }
 
 TEST(VolumeLoadVdb, TilesAndBackgroundInsideTheBox) {
