@@ -107,7 +107,7 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
                                           const VolumeLimits& limits) {
   InitializeOpenVdbOnce();
   // A foreign file is InvalidArgument, a damaged one DataLoss (OpenVDB reports both alike).
-  ISOSTREAM_RETURN_IF_ERROR(CheckVdbStructure(fd, path));
+  ISOSTREAM_RETURN_IF_ERROR(CheckVdbStructure(fd, path, limits));
 
   // OpenVDB opens files by name. Through the descriptor's /proc entry it reads the very file
   // just checked, even if PATH has since been replaced (a catalogue updated by renaming a new

@@ -24,11 +24,49 @@
 namespace isostream {
 namespace {
 
-// Whatever went wrong, at which byte; `unsupported` for a sound file this loader cannot read.
+// Whatever went wrong, at which byte; `unsupported` for a sound file this loader cannot read,
+// `too_big` for one whose tree would need more memory than the limits allow.
 struct Defect {
   int64_t at = 0;
   std::string what;
   bool unsupported = false;
+  bool too_big = false;
+};
+
+// The memory one float tree's nodes may take: twice what a volume within the limits can need
+// (its active box, at most max_dim per axis, meets at most ceil(max_dim / width) + 1 nodes of a
+// width per axis; the slack is for inactive nodes beside it). OpenVDB allocates every node a
+// file names before the active box can be checked, so a damaged or crafted file otherwise costs
+// ~30x its size: an internal node of 4096^3 voxels is ~260 KB from ~8 KB of file.
+class NodeBudget {
+ public:
+  explicit NodeBudget(const VolumeLimits& limits) : max_dim_(limits.max_dim) {
+    for (int l = 0; l < 3; ++l) {
+      const int64_t width = int64_t{1} << kWidthLog2[l];
+      const int64_t across = (max_dim_ + width - 1) / width + 1;
+      max_bytes_ += 2 * across * across * across * kBytes[l];
+    }
+  }
+  void StartTree() { bytes_ = 0; }
+  // One more node at `level`: 0 for 4096^3 voxels, 1 for 128^3, 2 for a leaf. False once the
+  // tree is over budget.
+  bool Add(int level) { return (bytes_ += kBytes[level]) <= max_bytes_; }
+  std::string Exceeded(const std::string& where) const {
+    return where + "'s tree would take more than " + std::to_string(max_bytes_ >> 20) +
+           " MB, twice what a volume within the limit of " + std::to_string(max_dim_) +
+           " samples per axis can need";
+  }
+
+ private:
+  using Internal5 = openvdb::FloatTree::RootNodeType::ChildNodeType;
+  using Internal4 = Internal5::ChildNodeType;
+  using Leaf = Internal4::ChildNodeType;
+  static constexpr int kWidthLog2[3] = {12, 7, 3};
+  static constexpr int64_t kBytes[3] = {sizeof(Internal5), sizeof(Internal4),
+                                        sizeof(Leaf) + Leaf::SIZE * sizeof(float)};
+  int max_dim_;
+  int64_t max_bytes_ = 0;
+  int64_t bytes_ = 0;
 };
 
 // Reads a file inside a window [pos, end), never past it, through a buffer that skips keep:
@@ -81,7 +119,7 @@ class WindowReader {
 
 class VdbStructure {
  public:
-  explicit VdbStructure(WindowReader* in) : in_(*in) {}
+  VdbStructure(WindowReader* in, const VolumeLimits& limits) : in_(*in), budget_(limits) {}
 
   // The whole file; false with defect() set at the first fault.
   bool Check() {
@@ -146,6 +184,12 @@ class VdbStructure {
   }
   bool Unsupported(int64_t at, std::string what) {
     defect_ = {at, std::move(what), true};
+    return false;
+  }
+  // One more node at `level` (NodeBudget::Add) in the current tree.
+  bool CountNode(int level, int64_t at, const std::string& where) {
+    if (budget_.Add(level)) return true;
+    defect_ = {at, budget_.Exceeded(where), false, true};
     return false;
   }
   template <typename T>
@@ -371,6 +415,7 @@ class VdbStructure {
   // OpenVDB reads the values of leaves in the order of the root's std::map<Coord> (a later
   // entry at the same origin replacing an earlier one), so that is mirrored here.
   bool Tree(uint32_t tiles, uint32_t children, const std::string& where) {
+    budget_.StartTree();
     std::map<std::array<int32_t, 3>, int> table;  // origin -> child (-1: a tile)
     for (uint32_t t = 0; t < tiles; ++t) {
       std::array<int32_t, 3> origin;
@@ -380,7 +425,9 @@ class VdbStructure {
     std::vector<std::vector<Mask>> leaves(children);  // per root child, its leaves' masks
     for (uint32_t c = 0; c < children; ++c) {
       std::array<int32_t, 3> origin;
-      if (!Get(&origin, "root child origin") || !Internal(5, &leaves[c], where)) return false;
+      if (!Get(&origin, "root child origin") || !CountNode(0, in_.pos(), where) ||
+          !Internal(5, &leaves[c], where))
+        return false;
       table[origin] = int(c);
     }
     if (has_offsets_ && in_.pos() != in_.end())
@@ -435,11 +482,12 @@ class VdbStructure {
       }
       if (!((masks[i / 8] >> (i % 8)) & 1)) continue;
       if (log2 == 5) {
-        if (!Internal(4, leaves, where)) return false;
+        if (!CountNode(1, in_.pos(), where) || !Internal(4, leaves, where)) return false;
         continue;
       }
       Mask mask;
       const int64_t leaf_at = in_.pos();
+      if (!CountNode(2, leaf_at, where)) return false;
       if (!in_.Read(mask.data(), int64_t(mask.size())))
         return Fail(leaf_at, where + " leaf mask runs past the end");
       leaves->push_back(mask);
@@ -522,27 +570,29 @@ class VdbStructure {
   int64_t grid_end_ = 0;            // the current grid's
   uint32_t compression_ = 0;        // the current grid's compression flags
   bool half_ = false;               // the current grid stores its values as 16-bit floats
+  NodeBudget budget_;
   Defect defect_;
 };
 
 }  // namespace
 
-absl::Status CheckVdbStructure(int fd, const std::string& path) {
+absl::Status CheckVdbStructure(int fd, const std::string& path, const VolumeLimits& limits) {
   struct stat st;
   if (fstat(fd, &st) != 0) return absl::DataLossError(path + ": cannot read its size");
   WindowReader in(fd, int64_t(st.st_size));
-  VdbStructure structure(&in);
+  VdbStructure structure(&in, limits);
   if (structure.Check()) return absl::OkStatus();
   const Defect& d = structure.defect();
   if (d.unsupported) return absl::InvalidArgumentError(path + ": " + d.what);
+  if (d.too_big) return absl::ResourceExhaustedError(path + ": " + d.what);
   return absl::DataLossError(path + ": corrupt OpenVDB file (byte " + std::to_string(d.at) + ": " +
                              d.what + ")");
 }
 
-absl::Status CheckVdbStructure(const std::string& path) {
+absl::Status CheckVdbStructure(const std::string& path, const VolumeLimits& limits) {
   const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return absl::NotFoundError(path + ": cannot open");
-  const absl::Status status = CheckVdbStructure(fd, path);
+  const absl::Status status = CheckVdbStructure(fd, path, limits);
   close(fd);
   return status;
 }

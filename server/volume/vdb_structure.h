@@ -14,19 +14,24 @@
 
 #include <string>
 
+#include "server/volume/volume.h"
 #include "shared/status.h"
 
 namespace isostream {
 
 // OK if the structure of the file open as FD (read-only; read with pread, so its offset is left
-// alone) is sound. Otherwise DataLoss naming the byte offset and what was wrong there, or
+// alone) is sound. Otherwise DataLoss naming the byte offset and what was wrong there,
 // InvalidArgument for a file this loader will not read (not an OpenVDB file, a format version
 // before 222, a float and a non-float grid of one name, a stream-written file of several grids
-// or without a float grid). Messages start with PATH, the file's name. OpenVDB must be
-// initialised (its metadata type registry is consulted).
-absl::Status CheckVdbStructure(int fd, const std::string& path);
+// or without a float grid), or ResourceExhausted for a float tree of more nodes than twice what
+// a volume within LIMITS needs (OpenVDB would allocate them all before its active box could be
+// checked). Messages start with PATH, the file's name. OpenVDB must be initialised (its
+// metadata type registry is consulted).
+absl::Status CheckVdbStructure(int fd, const std::string& path,
+                               const VolumeLimits& limits = VolumeLimits{});
 
 // The same for the file at PATH.
-absl::Status CheckVdbStructure(const std::string& path);
+absl::Status CheckVdbStructure(const std::string& path,
+                               const VolumeLimits& limits = VolumeLimits{});
 
 }  // namespace isostream

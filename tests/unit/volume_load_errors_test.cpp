@@ -345,6 +345,31 @@ TEST(VolumeLoadErrors, DimsAboveLimits) {
   EXPECT_TRUE(LoadVolume("noise:6", limits).ok());
 }
 
+// OpenVDB allocates every node a file names before the active box can be checked: a tree
+// whose nodes would take more than twice the memory of the largest volume within the limits is
+// refused by the structure walk. Inactive voxels far apart add nodes (~300 KB each here) but
+// leave the active box alone, so only the node budget can refuse these.
+TEST(VolumeLoadErrors, TreesLargerThanTheLimitsNeed) {
+  VolumeLimits limits;
+  limits.max_dim = 64;  // a budget of ~8 MB: 20 scattered nodes fit, 40 do not
+  for (const int scattered : {20, 40}) {
+    SCOPED_TRACE(scattered);
+    auto grid = TestGrid("density", 1.0f);  // active box 10x9x12
+    for (int i = 1; i <= scattered; ++i)
+      grid->tree().setValueOff(openvdb::Coord(i * 4096, 0, 0), 0.5f);
+    const std::string path = WriteVdb("scattered" + std::to_string(scattered) + ".vdb", {grid});
+    EXPECT_TRUE(LoadVolume(path).ok());  // the default limits' budget is ~9 GB
+    const absl::StatusOr<VolumePtr> v = LoadVolume(path, limits);
+    if (scattered == 20) {
+      ASSERT_TRUE(v.ok()) << v.status();
+      EXPECT_EQ((*v)->dims, (std::array<int, 3>{10, 9, 12}));
+    } else {
+      ExpectError(v, absl::StatusCode::kResourceExhausted, "scattered40.vdb",
+                  "tree would take more than 7 MB");
+    }
+  }
+}
+
 TEST(VolumeLoadErrors, UnsupportedTypes) {
   NiftiFile nf;
   nf.datatype = 32;  // complex64
