@@ -123,6 +123,8 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
       {"transform.vdb", map, 0x7f000000u, "transform type claims", 0},
       {"root_tiles.vdb", root_tiles, 0x10000000u, "root claims 268435456 tiles", 0},
       {"root_children.vdb", root_tiles + 4, 3, "and 3 children", root_tiles},
+      {"grid_count.vdb", grid_count, 0x10000000u, "grid count 268435456 does not fit the file",
+       0},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
@@ -145,6 +147,9 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
       {"end_pos.vdb", offsets + 16, int64_t(good.size()) + 1, "lie outside the file", offsets},
       {"raw_chunk.vdb", size_t(block_pos) + 65, -1000, "holds a raw chunk sized -1000", 0},
       {"blosc_chunk.vdb", size_t(block_pos) + 65, chunk + 1, "Blosc chunk of another size", 0},
+      // The values said to start 8 bytes after the topology does end.
+      {"topology_end.vdb", offsets + 8, block_pos + 8, "topology ends 8 bytes before its values",
+       size_t(block_pos)},
   };
   for (const auto& c : wide) {
     SCOPED_TRACE(c.name);
@@ -216,6 +221,14 @@ TEST(VolumeLoadErrors, GridsTheWalkDoesNotVouchFor) {
   }
   ExpectError(LoadVolume(stream), absl::StatusCode::kInvalidArgument, "int_stream.vdb",
               "holds no float grid");
+  // A stream of several grids is read whole at open, whichever grid was asked for.
+  const std::string two = ScratchPath("two_stream.vdb");
+  {
+    std::ofstream out(two, std::ios::binary);
+    openvdb::io::Stream(out).write({TestGrid("a", 1.0f), TestGrid("b", 2.0f)});
+  }
+  ExpectError(LoadVolume(two + "#b"), absl::StatusCode::kInvalidArgument, "two_stream.vdb",
+              "several grids written without grid offsets");
 }
 
 TEST(VolumeLoadErrors, TruncatedData) {
