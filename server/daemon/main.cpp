@@ -44,6 +44,15 @@ int Run(const DaemonConfig& config) {
                        config.tls_cert);
       return 1;
     }
+    // gRPC reports a file that is not PEM only as a failure to listen, blaming the port.
+    if (pair.cert_chain.find("-----BEGIN CERTIFICATE-----") == std::string::npos) {
+      spdlog::critical("TLS certificate '{}' holds no PEM certificate", config.tls_cert);
+      return 1;
+    }
+    if (pair.private_key.find("PRIVATE KEY-----") == std::string::npos) {
+      spdlog::critical("TLS key '{}' holds no PEM private key", config.tls_key);
+      return 1;
+    }
     grpc::SslServerCredentialsOptions options;
     options.pem_key_cert_pairs.push_back(pair);
     creds = grpc::SslServerCredentials(options);
@@ -68,9 +77,14 @@ int Run(const DaemonConfig& config) {
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 60'000);
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 20'000);
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  // gRPC binds with SO_REUSEPORT by default: a second daemon on a busy port would start and
+  // take a share of its connections (clients then meet the other's catalogue at random).
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || port == 0) {
-    spdlog::critical("cannot listen on {}", config.listen);
+    spdlog::critical("cannot listen on {}: the port is in use, or the address is not this "
+                     "machine's",
+                     config.listen);
     return 1;
   }
   const std::string host = config.listen.substr(0, config.listen.rfind(':'));

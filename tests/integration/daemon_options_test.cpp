@@ -452,6 +452,39 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
   }
 }
 
+// A daemon that cannot serve as asked stops at start, exit 1, saying why: a port another
+// daemon holds (gRPC's default SO_REUSEPORT would have let both listen and split the
+// clients between them), and TLS files that hold no PEM (gRPC blames the port for those).
+TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
+  ScratchDir dir;
+  DaemonProcess first;
+  ASSERT_TRUE(first.Start({"--no-cache"}, dir.path() + "/first.log"));
+  CommandResult r = RunCommand(std::string("timeout 20 ") + ISOSTREAMD_PATH +
+                               " --no-cache --listen " + first.address());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot listen on " + first.address() + ": the port is in use"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(first.Stop(SIGTERM), 0);
+
+  const std::string junk = dir.path() + "/junk.pem";
+  { std::ofstream(junk) << "not a certificate\n"; }
+  std::string key, cert;
+  const bool have_pair = MakeTestCertificate(dir.path(), &key, &cert);
+  const std::string base =
+      std::string("timeout 20 ") + ISOSTREAMD_PATH + " --no-cache --listen 127.0.0.1:0 ";
+  r = RunCommand(base + "--tls-cert " + junk + " --tls-key " + (have_pair ? key : junk));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("TLS certificate '" + junk + "' holds no PEM certificate"),
+            std::string::npos)
+      << r.output;
+  if (!have_pair) GTEST_SKIP() << "openssl cannot make a test certificate";
+  r = RunCommand(base + "--tls-cert " + cert + " --tls-key " + junk);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("TLS key '" + junk + "' holds no PEM private key"), std::string::npos)
+      << r.output;
+}
+
 // One slot, a 2 s frame deadline and no idle timeout: a client that stops reading must not keep
 // the slot (a write it never takes would otherwise hold the stream open for good).
 class StalledClientDaemon : public Daemon {
