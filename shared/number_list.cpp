@@ -69,4 +69,10 @@ absl::Status CheckPort(std::string_view address, bool required) {
                                     "' is not HOST:PORT with a port in 0..65535");
 }
 
+std::string ShortestText(double v) {
+  char text[32];
+  const auto result = std::to_chars(text, text + sizeof(text), v == 0 ? 0.0 : v);
+  return std::string(text, result.ptr);
+}
+
 }  // namespace isostream

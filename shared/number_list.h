@@ -2,6 +2,7 @@
 // daemon's settings and the mesh renderer.
 #pragma once
 
+#include <string>
 #include <string_view>
 #include <vector>
 
@@ -23,5 +24,10 @@ absl::Status ParseImageSize(std::string_view text, std::string_view what, int ma
 // 16 bits, and a missing one as 443). Without `required`, an address whose part after its last
 // ':' is not a number at all passes (a bare host, "[::1]").
 absl::Status CheckPort(std::string_view address, bool required);
+
+// The shortest text that parses back to exactly v ("0" for -0): what tools print of a value a
+// user may paste back, such as the eps a budget search found (printed to 6 digits, that eps
+// gave another mesh).
+std::string ShortestText(double v);
 
 }  // namespace isostream

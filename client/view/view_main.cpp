@@ -339,9 +339,9 @@ int Run(const Args& args) {
     const absl::Status written = render::WritePng(*image, path);
     if (!written.ok()) return Fail(written);
     std::printf(
-        "%s: %lld triangles in %d chunks (%.1f KiB), eps %g, %d coarse frame(s) first, %.0f ms\n",
+        "%s: %lld triangles in %d chunks (%.1f KiB), eps %s, %d coarse frame(s) first, %.0f ms\n",
         path.c_str(), (long long)frame->mesh.triangle_count(), frame->chunks, frame->bytes / 1024.0,
-        frame->stats.eps_used(), coarse, ms);
+        ShortestText(frame->stats.eps_used()).c_str(), coarse, ms);
   }
   (*session)->CloseSend().IgnoreError();
   const absl::Status finished = (*session)->Finish();

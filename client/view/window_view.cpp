@@ -19,6 +19,7 @@
 
 #include "client/render/image.h"
 #include "client/view/frame_upload.h"
+#include "shared/number_list.h"
 
 namespace isostream::view {
 namespace {
@@ -256,8 +257,8 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
           result = (*renderer)->EndFrame();
           frame_open = false;
           if (!f.coarse) ++refined_frames;
-          std::snprintf(title, sizeof(title), "isostream-view  %s  eps %g  %lld triangles  %s",
-                        state.volume.c_str(), f.stats.eps_used(),
+          std::snprintf(title, sizeof(title), "isostream-view  %s  eps %s  %lld triangles  %s",
+                        state.volume.c_str(), ShortestText(f.stats.eps_used()).c_str(),
                         (long long)f.mesh.triangle_count(), f.coarse ? "(coarse)" : "");
           glfwSetWindowTitle(window, title);
         }

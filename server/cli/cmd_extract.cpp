@@ -7,6 +7,7 @@
 #include "server/cli/commands.h"
 #include "server/extract/extractor.h"
 #include "shared/glb_writer.h"
+#include "shared/number_list.h"
 #include "shared/ply_io.h"
 
 namespace isostream::cli {
@@ -25,7 +26,8 @@ void PrintStats(const ExtractRequest& r, const ExtractStats& s, const PreparedVo
   for (size_t i = 0; i < r.isovalues.size(); ++i)
     std::printf("  surface %zu   iso %-10g %lld triangles\n", i, r.isovalues[i],
                 (long long)s.triangles_per_surface[i]);
-  std::printf("eps used      %g%s\n", s.eps_used, r.budget > 0 ? "  (found for the budget)" : "");
+  std::printf("eps used      %s%s\n", ShortestText(s.eps_used).c_str(),
+              r.budget > 0 ? "  (found for the budget)" : "");
   std::printf("tets visited  %lld  (leaves with triangles %lld, subtrees %d)\n",
               (long long)s.tets_visited, (long long)s.leaves, s.subtrees);
   std::printf("ms            load %.1f  pad %.1f  hierarchy %.1f (cache %s)\n", p.load_s * 1e3,
@@ -64,10 +66,10 @@ int RunExtract(const ExtractArgs& args) {
     return 1;
   }
   if (args.stats) PrintStats(*request, result->stats, *prepared);
-  std::fprintf(stderr, "wrote %s: %lld triangles %s (eps %g)\n", args.output.c_str(),
+  std::fprintf(stderr, "wrote %s: %lld triangles %s (eps %s)\n", args.output.c_str(),
                (long long)result->stats.triangles,
                request->order == DrawOrder::kNone ? "unordered" : "in back-to-front order",
-               result->stats.eps_used);
+               ShortestText(result->stats.eps_used).c_str());
   return 0;
 }
 

@@ -6,6 +6,7 @@
 #include "client/net/session_client.h"
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
+#include "shared/number_list.h"
 #include "shared/ply_io.h"
 
 namespace isostream::cli {
@@ -100,17 +101,17 @@ int RunFetch(const FetchArgs& args) {
     const pb::FrameStats& s = frame->stats;
     std::printf("triangles     %lld  (vertices on the server %lld)\n", (long long)s.triangles(),
                 (long long)s.vertices());
-    std::printf("eps used      %g\n", s.eps_used());
+    std::printf("eps used      %s\n", ShortestText(s.eps_used()).c_str());
     std::printf("chunks        %d, %lld bytes (%.2f bytes/triangle)\n", frame->chunks,
                 (long long)frame->bytes,
                 s.triangles() > 0 ? double(frame->bytes) / double(s.triangles()) : 0.0);
     std::printf("ms            extract %.1f  encode %.1f (summed over chunks)  frame %.1f\n",
                 s.extract_ms(), s.encode_ms(), s.frame_ms());
   }
-  std::fprintf(stderr, "wrote %s: %zu triangles %s (eps %g)\n", args.output.c_str(),
+  std::fprintf(stderr, "wrote %s: %zu triangles %s (eps %s)\n", args.output.c_str(),
                frame->mesh.triangle_count(),
                args.view.order == "none" ? "unordered" : "in back-to-front order",
-               frame->stats.eps_used());
+               ShortestText(frame->stats.eps_used()).c_str());
   return 0;
 }
 

@@ -9,6 +9,7 @@
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
 #include "server/extract/extractor.h"
+#include "shared/number_list.h"
 
 namespace isostream::cli {
 namespace {
@@ -29,7 +30,7 @@ int PrintCountsByEps(const PreparedVolume& prepared, ExtractRequest r,
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   std::printf("triangles by eps  (isovalues %s; one counting pass, %.0f ms)\n", iso_text.c_str(),
               ms);
-  std::printf("  %-12s  %s\n", "eps", "triangles");
+  std::printf("  %-16s  %s\n", "eps", "triangles");
   const int64_t full = (*counts)[0];
   uint32_t code = top;
   int64_t shown = -1;
@@ -37,13 +38,14 @@ int PrintCountsByEps(const PreparedVolume& prepared, ExtractRequest r,
     // An octave that adds nothing is not a row (the count may stay put for dozens of octaves
     // of tiny eps, down to eps 0).
     if ((*counts)[code] != shown) {
-      std::printf("  %-12g  %lld\n", EtaCodeEps(code), (long long)(*counts)[code]);
+      std::printf("  %-16s  %lld\n", ShortestText(EtaCodeEps(code)).c_str(),
+                  (long long)(*counts)[code]);
       shown = (*counts)[code];
     }
     // Past 99% of the full-resolution count the octaves add little: that count closes.
     if (code == 0 || 100 * (*counts)[code] >= 99 * full) break;
   }
-  if (code != 0) std::printf("  %-12s  %lld\n", "0", (long long)full);
+  if (code != 0) std::printf("  %-16s  %lld\n", "0", (long long)full);
   return 0;
 }
 
