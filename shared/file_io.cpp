@@ -1,10 +1,15 @@
 #include "shared/file_io.h"
 
 #include <absl/strings/str_cat.h>
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <climits>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 
 namespace isostream {
@@ -14,6 +19,24 @@ struct FileCloser {
   void operator()(std::FILE* f) const { std::fclose(f); }
 };
 using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
+// Writes all of `bytes` to `file` and closes it; false with errno set otherwise.
+bool WriteAndClose(std::FILE* file, std::string_view bytes) {
+  const bool written = std::fwrite(bytes.data(), 1, bytes.size(), file) == bytes.size();
+  const int error = errno;
+  // fclose flushes; a full disk may only show up here.
+  const bool closed = std::fclose(file) == 0;
+  if (!written) errno = error;
+  return written && closed;
+}
+
+absl::Status WriteInPlace(const std::string& path, std::string_view bytes) {
+  std::FILE* file = std::fopen(path.c_str(), "wb");
+  if (!file) return absl::ErrnoToStatus(errno, absl::StrCat("cannot create ", path));
+  if (!WriteAndClose(file, bytes))
+    return absl::ErrnoToStatus(errno, absl::StrCat("cannot write ", path));
+  return absl::OkStatus();
+}
 
 }  // namespace
 
@@ -34,14 +57,36 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path) {
 }
 
 absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
-  FilePtr file(std::fopen(path.c_str(), "wb"));
-  if (!file) return absl::ErrnoToStatus(errno, absl::StrCat("cannot create ", path));
-  if (std::fwrite(bytes.data(), 1, bytes.size(), file.get()) != bytes.size()) {
-    return absl::ErrnoToStatus(errno, absl::StrCat("cannot write ", path));
+  struct stat st;
+  const bool exists = ::stat(path.c_str(), &st) == 0;
+  if (exists && !S_ISREG(st.st_mode)) return WriteInPlace(path, bytes);
+  std::string target = path;
+  if (exists && ::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
+    char resolved[PATH_MAX];
+    if (::realpath(path.c_str(), resolved) == nullptr) return WriteInPlace(path, bytes);
+    target = resolved;
   }
-  // fclose flushes; a full disk may only show up here.
-  if (std::fclose(file.release()) != 0) {
-    return absl::ErrnoToStatus(errno, absl::StrCat("cannot write ", path));
+  // Beside the target, so the rename stays within one file system; O_EXCL with a name no other
+  // writer in this process or another uses. Mode 0666 less the umask, as fopen would create.
+  static std::atomic<unsigned> serial{0};
+  const std::string partial =
+      absl::StrCat(target, ".partial-", ::getpid(), "-", serial.fetch_add(1));
+  const int fd = ::open(partial.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd < 0) {
+    if (errno == EACCES || errno == EROFS || errno == EPERM) return WriteInPlace(path, bytes);
+    return absl::ErrnoToStatus(errno, absl::StrCat("cannot create ", path));
+  }
+  std::FILE* file = ::fdopen(fd, "wb");
+  if (file == nullptr) {
+    const int error = errno;
+    ::close(fd);
+    ::unlink(partial.c_str());
+    return absl::ErrnoToStatus(error, absl::StrCat("cannot write ", path));
+  }
+  if (!WriteAndClose(file, bytes) || ::rename(partial.c_str(), target.c_str()) != 0) {
+    const int error = errno;
+    ::unlink(partial.c_str());
+    return absl::ErrnoToStatus(error, absl::StrCat("cannot write ", path));
   }
   return absl::OkStatus();
 }

@@ -13,8 +13,11 @@ namespace isostream {
 // otherwise.
 absl::StatusOr<std::string> ReadFileBytes(const std::string& path);
 
-// Creates or truncates the file at `path` and writes `bytes` to it. On failure the file may be
-// left partially written.
+// Writes `bytes` as the file at `path`, whole or not at all: into a new file beside it, renamed
+// over `path` once complete, so a failed write (a full disk, a file size limit) leaves the
+// previous file as it was and no partial one. A symbolic link's target is replaced, the link
+// kept. What is not a regular file (/dev/null, a FIFO) is written in place, as is a file in a
+// directory where no new file can be made.
 absl::Status WriteFileBytes(const std::string& path, std::string_view bytes);
 
 // Returns `status` with "`context`: " in front of its message (OK stays OK), so errors from

@@ -1,0 +1,93 @@
+// Whole-file writes (shared/file_io.h): a file is replaced whole or left as it was.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+
+#include "shared/file_io.h"
+
+namespace isostream {
+namespace {
+
+namespace fs = std::filesystem;
+
+class FileIo : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::string pattern = ::testing::TempDir() + "/isostream_file_io_XXXXXX";
+    ASSERT_NE(mkdtemp(pattern.data()), nullptr);
+    dir_ = pattern;
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Path(const std::string& name) const { return dir_ + "/" + name; }
+  std::vector<std::string> Names() const {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir_)) names.push_back(e.path().filename());
+    std::sort(names.begin(), names.end());
+    return names;
+  }
+  std::string dir_;
+};
+
+// A write cut short (here by a file size limit; a full disk or a quota alike) must leave the
+// previous file whole and no partial file beside it: an `extract -o` over last run's mesh used
+// to leave a truncated one.
+TEST_F(FileIo, AFailedWriteLeavesThePreviousFileAndNoPartOfTheNewOne) {
+  const std::string path = Path("mesh.ply");
+  ASSERT_TRUE(WriteFileBytes(path, "the previous mesh").ok());
+  rlimit saved;
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &saved), 0);
+  const rlimit small = {4096, saved.rlim_max};
+  auto* const previous = signal(SIGXFSZ, SIG_IGN);  // a write past the limit fails, EFBIG
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+  const absl::Status s = WriteFileBytes(path, std::string(1 << 16, 'x'));
+  setrlimit(RLIMIT_FSIZE, &saved);
+  signal(SIGXFSZ, previous);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("cannot write " + path), std::string::npos) << s;
+  auto kept = ReadFileBytes(path);
+  ASSERT_TRUE(kept.ok()) << kept.status();
+  EXPECT_EQ(*kept, "the previous mesh");
+  EXPECT_EQ(Names(), std::vector<std::string>{"mesh.ply"});
+}
+
+TEST_F(FileIo, ReplacesAFileWholeWithTheUsualMode) {
+  const std::string path = Path("frame.png");
+  ASSERT_TRUE(WriteFileBytes(path, "one").ok());
+  ASSERT_TRUE(WriteFileBytes(path, "two, longer").ok());
+  EXPECT_EQ(*ReadFileBytes(path), "two, longer");
+  EXPECT_EQ(Names(), std::vector<std::string>{"frame.png"});
+  const mode_t mask = umask(0);
+  umask(mask);
+  struct stat st;
+  ASSERT_EQ(stat(path.c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0666 & ~mask);
+}
+
+// A link stays a link (its target is replaced); a device is written in place, never renamed
+// over; a directory or a missing folder is an error naming the path.
+TEST_F(FileIo, LinksDevicesAndDirectories) {
+  const std::string target = Path("target.glb"), link = Path("link.glb");
+  ASSERT_TRUE(WriteFileBytes(target, "old").ok());
+  fs::create_symlink(target, link);
+  ASSERT_TRUE(WriteFileBytes(link, "new").ok());
+  EXPECT_TRUE(fs::is_symlink(link));
+  EXPECT_EQ(*ReadFileBytes(target), "new");
+  EXPECT_EQ(Names(), (std::vector<std::string>{"link.glb", "target.glb"}));
+
+  EXPECT_TRUE(WriteFileBytes("/dev/null", "discarded").ok());
+  EXPECT_TRUE(fs::is_character_file("/dev/null"));
+
+  const absl::Status into_dir = WriteFileBytes(dir_, "x");
+  EXPECT_FALSE(into_dir.ok());
+  EXPECT_NE(into_dir.message().find(dir_), std::string::npos) << into_dir;
+  const absl::Status no_folder = WriteFileBytes(Path("missing/out.ply"), "x");
+  EXPECT_EQ(no_folder.code(), absl::StatusCode::kNotFound) << no_folder;
+}
+
+}  // namespace
+}  // namespace isostream
