@@ -29,6 +29,11 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
       // Refused: nothing listens there, so TLS is not the question.
       if (m.find("Connection refused") != std::string::npos)
         return "cannot reach isostreamd at " + options.address + " (" + m + ")";
+      // gRPC says "failed to connect" (or names the handshake) while no connection was made;
+      // otherwise one was, and broke (the daemon stopped or was killed mid-frame).
+      if (m.find("failed to connect") == std::string::npos &&
+          m.find("SETTINGS") == std::string::npos && m.find("handshake") == std::string::npos)
+        return "lost the connection to isostreamd at " + options.address + " (" + m + ")";
       return "cannot reach isostreamd at " + options.address + " (" + m + ")" +
              (options.tls_ca_pem.empty()
                   ? "; connected without TLS: if the daemon serves TLS, pass --tls-ca"
@@ -39,7 +44,8 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
     case absl::StatusCode::kNotFound:
       return m;
     case absl::StatusCode::kDeadlineExceeded:
-      return "the server did not answer in time (" + m + ")";
+      return "the server did not answer within " +
+             ShortestText(double(options.call_timeout.count()) / 1000) + " s (" + m + ")";
     default:
       return std::string(absl::StatusCodeToString(s.code())) + ": " + m;
   }
@@ -174,7 +180,8 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& opt
 
 void Client::Prepare(grpc::ClientContext* context, bool deadline) const {
   if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
-  if (deadline) context->set_deadline(std::chrono::system_clock::now() + options_.call_timeout);
+  if (deadline && options_.call_timeout.count() > 0)
+    context->set_deadline(std::chrono::system_clock::now() + options_.call_timeout);
 }
 
 absl::StatusOr<pb::ListVolumesResponse> Client::ListVolumes() {
@@ -209,7 +216,8 @@ absl::StatusOr<pb::ServerStats> Client::GetServerStats() {
 absl::StatusOr<bool> Client::CheckHealth() {
   auto stub = grpc::health::v1::Health::NewStub(channel_);
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + options_.call_timeout);
+  if (options_.call_timeout.count() > 0)
+    context.set_deadline(std::chrono::system_clock::now() + options_.call_timeout);
   grpc::health::v1::HealthCheckResponse response;
   ISOSTREAM_RETURN_IF_ERROR(
       FromGrpc(stub->Check(&context, grpc::health::v1::HealthCheckRequest(), &response)));

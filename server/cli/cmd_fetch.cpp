@@ -1,5 +1,6 @@
 // `isostream fetch`: asks a running isostreamd for one frame and writes it, decoded, as PLY.
 // The view flags are `extract`'s, so a fetched frame can be compared with a local extraction.
+#include <chrono>
 #include <cstdio>
 #include <iostream>
 
@@ -22,6 +23,7 @@ struct FetchArgs {
   std::string codec = "draco";
   std::string tls_ca;
   int64_t max_frame_triangles = net::kDefaultMaxFrameTriangles;
+  int timeout_s = 60;
   bool progressive = false;
   std::string output;
   bool stats = false;
@@ -72,6 +74,7 @@ int RunFetch(const FetchArgs& args) {
   options.address = args.server;
   options.token = args.token;
   options.max_frame_triangles = args.max_frame_triangles;
+  options.call_timeout = std::chrono::seconds(args.timeout_s);
   if (!args.tls_ca.empty()) {
     auto pem = net::ReadTlsCa(args.tls_ca);
     if (!pem.ok()) return fail(std::string(pem.status().message()), 2);
@@ -134,6 +137,10 @@ CLI::App* AddFetchCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--max-frame-triangles", args->max_frame_triangles,
                   "refuse a frame past this many triangles (default 2^26)")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
+  cmd->add_option("--timeout-s", args->timeout_s,
+                  "fail unless the whole frame arrives within this many seconds, connecting "
+                  "included (default 60; 0: wait forever)")
+      ->check(CLI::Range(0, 86400));
   cmd->add_flag("--progressive", args->progressive, "let the server send a coarse frame first");
   cmd->add_option("-o,--output", args->output, "out.ply")->required();
   cmd->add_flag("--stats", args->stats, "print counts, sizes and timings");

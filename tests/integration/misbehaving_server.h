@@ -1,6 +1,7 @@
 // A gRPC server on 127.0.0.1 that speaks the isostream contract badly, for the clients' tests:
-// a volume info with the wrong number of dims, a session that never sends a chunk, or a frame
-// that never ends. Only what a client meets is implemented (GetVolumeInfo and Session).
+// a volume info with the wrong number of dims or none at all, a session that never sends a chunk,
+// a frame that never ends, or a whole frame and then an error. Only what a client meets is
+// implemented (GetVolumeInfo and Session).
 #pragma once
 
 #include <grpcpp/grpcpp.h>
@@ -21,6 +22,8 @@ enum class Misbehaviour {
   kTwoDims,       // GetVolumeInfo describes the volume with 2 dims
   kStall,         // Session reads the view and then sends nothing
   kEndlessFrame,  // Session answers the view with chunks of one frame that never ends
+  kSilentInfo,    // GetVolumeInfo never answers
+  kFrameThenGone,  // Session answers the view with a whole frame, then ends UNAVAILABLE
 };
 
 class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
@@ -44,8 +47,13 @@ class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
   std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
   int chunks_sent() const { return chunks_sent_.load(); }
 
-  grpc::Status GetVolumeInfo(grpc::ServerContext*, const ::isostream::v1::GetVolumeInfoRequest* r,
+  grpc::Status GetVolumeInfo(grpc::ServerContext* context,
+                             const ::isostream::v1::GetVolumeInfoRequest* r,
                              ::isostream::v1::VolumeInfo* info) override {
+    if (how_ == Misbehaviour::kSilentInfo) {
+      WaitForTheClientToLeave(context);
+      return grpc::Status(grpc::StatusCode::CANCELLED, "silent");
+    }
     info->set_name(r->name());
     for (int a = 0; a < (how_ == Misbehaviour::kTwoDims ? 2 : 3); ++a) info->add_dims(33);
     info->mutable_spacing()->set_x(1);
@@ -61,6 +69,19 @@ class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
                                                 ::isostream::v1::ViewRequest>* stream) override {
     ::isostream::v1::ViewRequest view;
     if (!stream->Read(&view)) return grpc::Status::OK;
+    if (how_ == Misbehaviour::kFrameThenGone) {
+      const OrderedMesh strip = Strip(kTrianglesPerChunk);
+      ::isostream::v1::FrameChunk chunk;
+      if (!EncodeChunkRaw(strip, 0, strip.triangle_count(), chunk.mutable_data()).ok())
+        return grpc::Status(grpc::StatusCode::INTERNAL, "cannot encode the test chunk");
+      chunk.set_frame_id(view.request_id());
+      chunk.set_last(true);
+      chunk.set_chunk_count(1);
+      chunk.set_triangle_count(kTrianglesPerChunk);
+      chunk.mutable_stats()->set_triangles(kTrianglesPerChunk);
+      stream->Write(chunk);
+      return grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down");
+    }
     if (how_ == Misbehaviour::kEndlessFrame) {
       std::string data;
       const OrderedMesh strip = Strip(kTrianglesPerChunk);
@@ -78,14 +99,18 @@ class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
       }
       return grpc::Status::OK;
     }
-    // Silence until the client leaves (or the test ends).
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    while (!context->IsCancelled() && !stop_ && std::chrono::steady_clock::now() < give_up)
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    WaitForTheClientToLeave(context);
     return grpc::Status(grpc::StatusCode::CANCELLED, "stalled");
   }
 
  private:
+  // Silence until the client leaves (or the test ends, or a minute passes).
+  void WaitForTheClientToLeave(grpc::ServerContext* context) const {
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!context->IsCancelled() && !stop_ && std::chrono::steady_clock::now() < give_up)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+
   // A strip of `n` triangles inside the unit cube.
   static OrderedMesh Strip(int n) {
     OrderedMesh m;

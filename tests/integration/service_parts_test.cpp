@@ -1,5 +1,6 @@
-// The daemon's parts without a process: config parsing, catalogue names, quantization, and the
-// frame producer against a sink that never drains (bounded memory, deadline).
+// The daemon's parts without a process: config parsing, catalogue names, quantization, the
+// frame producer against a sink that never drains (bounded memory, deadline), and how the
+// client explains failed calls.
 #include <gtest/gtest.h>
 
 #include <fstream>
@@ -21,6 +22,30 @@ absl::Status LoadText(const std::string& text, DaemonConfig* c) {
   const std::string path = dir.path() + "/c.json";
   std::ofstream(path) << text;
   return LoadConfigFile(path, c);
+}
+
+// gRPC's UNAVAILABLE covers a daemon never reached and a connection lost mid-frame (a daemon
+// stopped or killed): only the first may be a TLS mismatch worth a hint; the second said
+// "cannot reach" with that hint. The messages are gRPC 1.51's.
+TEST(ClientErrors, SayWhetherTheConnectionWasMadeOrLost) {
+  net::ClientOptions o;
+  o.address = "127.0.0.1:7878";
+  const std::string never = net::ExplainCallError(
+      absl::UnavailableError("failed to connect to all addresses; last error: UNAVAILABLE: "
+                             "ipv4:127.0.0.1:7878: Socket closed"),
+      o);
+  EXPECT_NE(never.find("cannot reach isostreamd at 127.0.0.1:7878"), std::string::npos) << never;
+  EXPECT_NE(never.find("--tls-ca"), std::string::npos) << never;
+  for (const char* lost : {"Socket closed", "Broken pipe", "recvmsg:Connection reset by peer"}) {
+    const std::string m = net::ExplainCallError(absl::UnavailableError(lost), o);
+    EXPECT_NE(m.find("lost the connection to isostreamd at 127.0.0.1:7878"), std::string::npos)
+        << m;
+    EXPECT_EQ(m.find("--tls-ca"), std::string::npos) << m;
+  }
+  o.call_timeout = std::chrono::milliseconds(2500);
+  const std::string late =
+      net::ExplainCallError(absl::DeadlineExceededError("Deadline Exceeded"), o);
+  EXPECT_NE(late.find("did not answer within 2.5 s"), std::string::npos) << late;
 }
 
 TEST(Config, ReadsKnownKeysAndNamesBadOnes) {

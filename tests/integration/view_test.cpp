@@ -250,7 +250,40 @@ TEST(View, MisbehavingServersGiveClearErrors) {
     // The viewer stopped the stream; the server did not run out of chunks to send.
     EXPECT_LT(server.chunks_sent(), testing::MisbehavingServer::kMaxChunks);
   }
+  {
+    // --timeout-s bounds the first call too: it waited 30 s (gRPC's call default) whatever
+    // was asked. The bound below is loose; what matters is that 1 s is honoured, not 30.
+    testing::MisbehavingServer server(testing::Misbehaviour::kSilentInfo);
+    ASSERT_TRUE(server.ok());
+    const auto t0 = std::chrono::steady_clock::now();
+    const ViewRun r = View("--server " + server.address() + common + " --timeout-s 1");
+    EXPECT_EQ(r.code, 1);
+    EXPECT_NE(r.output.find("did not answer within 1 s"), std::string::npos) << r.output;
+    const ViewRun f = testing::RunCommand(std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
+                                          server.address() +
+                                          " --volume sphere:33 --iso 0.5 --eps 0.01 "
+                                          "--timeout-s 1 -o " +
+                                          dir.path() + "/never.ply");
+    EXPECT_EQ(f.code, 1);
+    EXPECT_NE(f.output.find("did not answer within 1 s"), std::string::npos) << f.output;
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(20));
+  }
   EXPECT_FALSE(std::filesystem::exists(png));
+  EXPECT_FALSE(std::filesystem::exists(dir.path() + "/never.ply"));
+}
+
+// Once every frame asked for is written, how the stream ends does not matter: a daemon stopping
+// right after the frame made the viewer exit 1 with "cannot reach isostreamd".
+TEST(View, AFrameWrittenIsASuccessHoweverTheStreamEnds) {
+  testing::ScratchDir dir;
+  testing::MisbehavingServer server(testing::Misbehaviour::kFrameThenGone);
+  ASSERT_TRUE(server.ok());
+  const std::string png = dir.path() + "/frame.png";
+  const ViewRun r = View("--server " + server.address() +
+                         " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 -o " + png);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("100 triangles"), std::string::npos) << r.output;
+  EXPECT_TRUE(std::filesystem::exists(png));
 }
 
 // Arguments it cannot honour are refused before any frame is asked for: an image it would not
