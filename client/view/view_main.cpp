@@ -237,10 +237,15 @@ int Run(const Args& args) {
     lo[a] = o;
     hi[a] = o + s * float(info->dims(a) - 1);
   }
+  // In double: the float range of values near +-FLT_MAX overflows.
+  const double min_value = info->min_value(), value_range = double(info->max_value()) - min_value;
   std::vector<double> iso;
-  if (args.iso.empty()) {
-    for (double f : {0.2, 0.4, 0.6})
-      iso.push_back(info->min_value() + f * (info->max_value() - info->min_value()));
+  if (args.iso.empty() && value_range == 0) {
+    std::fprintf(stderr, "isostream-view: %s holds the one value %s: it has no isosurface\n",
+                 args.volume.c_str(), ShortestText(min_value).c_str());
+    iso.push_back(min_value);
+  } else if (args.iso.empty()) {
+    for (double f : {0.2, 0.4, 0.6}) iso.push_back(min_value + f * value_range);
   } else {
     auto parsed = ParseNumbers(args.iso, "--iso");
     if (!parsed.ok()) return Fail(parsed.status());
@@ -285,7 +290,7 @@ int Run(const Args& args) {
   state.budget = args.budget;
   // Not given: 0.2% of the value range. A given eps goes to the server as it is: the server
   // validates it and says what is wrong.
-  state.eps = !std::isnan(args.eps) ? args.eps : 0.002 * (info->max_value() - info->min_value());
+  state.eps = !std::isnan(args.eps) ? args.eps : 0.002 * value_range;
   state.raw_codec = args.codec == "raw";
   state.progressive = args.progressive;
 
@@ -305,7 +310,7 @@ int Run(const Args& args) {
     window.height = height;
     window.state = state;
     window.camera = camera;
-    window.value_range = info->max_value() - info->min_value();
+    window.value_range = value_range;
     window.exit_after_frames = args.exit_after_frames;
     window.screenshot = args.output;
     renderer->reset();  // the window makes its own context and renderer

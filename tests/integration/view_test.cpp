@@ -272,6 +272,42 @@ TEST(View, MisbehavingServersGiveClearErrors) {
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/never.ply"));
 }
 
+// Without --iso the viewer draws at 20, 40 and 60% of the value range: computed in float, a
+// range near +-FLT_MAX overflowed to "isovalue is not a finite number", and a constant volume
+// sent one value three times ("given twice"), though the user gave no isovalues at all.
+TEST(View, DefaultIsovaluesForExtremeAndConstantVolumes) {
+  testing::ScratchDir dir;
+  auto raw = [&](const std::string& name, float a, float b) {
+    const std::string path = dir.path() + "/" + name + ".raw";
+    std::ofstream out(path, std::ios::binary);
+    for (int i = 0; i < 27; ++i) {
+      const float v = i % 2 ? a : b;
+      out.write(reinterpret_cast<const char*>(&v), sizeof v);
+    }
+    return name + "=raw:" + path + ":3x3x3:float32";
+  };
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache", "--volume", raw("extreme", -3e38f, 3e38f), "--volume",
+                            raw("constant", 0.5f, 0.5f)},
+                           dir.path() + "/isostreamd.log"));
+  for (const std::string name : {"extreme", "constant"}) {
+    SCOPED_TRACE(name);
+    const std::string png = dir.path() + "/" + name + ".png";
+    const ViewRun r =
+        View("--server " + daemon.address() + " --volume " + name + " --size 64x64 -o " + png);
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_TRUE(std::filesystem::exists(png));
+    if (name == "constant") {
+      EXPECT_NE(r.output.find("holds the one value 0.5: it has no isosurface"), std::string::npos)
+          << r.output;
+      EXPECT_NE(r.output.find(": 0 triangles"), std::string::npos) << r.output;
+    } else {
+      EXPECT_EQ(r.output.find(": 0 triangles"), std::string::npos) << r.output;
+    }
+  }
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 // Once every frame asked for is written, how the stream ends does not matter: a daemon stopping
 // right after the frame made the viewer exit 1 with "cannot reach isostreamd".
 TEST(View, AFrameWrittenIsASuccessHoweverTheStreamEnds) {
