@@ -10,6 +10,8 @@
 #include <climits>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <iostream>
 #include <memory>
 
 namespace isostream {
@@ -89,6 +91,14 @@ absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
     return absl::ErrnoToStatus(error, absl::StrCat("cannot write ", path));
   }
   return absl::OkStatus();
+}
+
+bool FlushStandardOutput(const char* program) {
+  std::cout.flush();
+  const bool written = std::fflush(stdout) == 0 && !std::ferror(stdout) && std::cout.good();
+  if (!written)
+    std::fprintf(stderr, "%s: cannot write standard output: %s\n", program, std::strerror(errno));
+  return written;
 }
 
 absl::Status PrefixStatus(std::string_view context, const absl::Status& status) {

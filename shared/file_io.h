@@ -20,6 +20,10 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path);
 // directory where no new file can be made.
 absl::Status WriteFileBytes(const std::string& path, std::string_view bytes);
 
+// Flushes standard output (C stdio and iostreams); false, after saying so on standard error as
+// `program`, if what the program printed could not all be written (a full disk, /dev/full).
+bool FlushStandardOutput(const char* program);
+
 // Returns `status` with "`context`: " in front of its message (OK stays OK), so errors from
 // parsers that only see bytes can name the file they came from.
 absl::Status PrefixStatus(std::string_view context, const absl::Status& status);

@@ -30,6 +30,7 @@
 #include "client/view/frame_upload.h"
 #include "client/view/view_request.h"
 #include "client/view/window_view.h"
+#include "shared/file_io.h"
 #include "shared/given_number.h"
 #include "shared/number_list.h"
 
@@ -414,7 +415,9 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    return isostream::view::Run(args);
+    const int code = isostream::view::Run(args);
+    if (!isostream::FlushStandardOutput("isostream-view") && code == 0) return 1;
+    return code;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "isostream-view: out of memory\n");
   } catch (const std::exception& e) {

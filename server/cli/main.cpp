@@ -3,6 +3,7 @@
 #include <new>
 
 #include "server/cli/commands.h"
+#include "shared/file_io.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"isostream: multiresolution transparent isosurfaces (Gerstner's method)"};
@@ -27,5 +28,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 1;
   }
+  // What a command printed (the tets table, the info report, --stats) is its result too.
+  if (!isostream::FlushStandardOutput("isostream") && exit_code == 0) return 1;
   return exit_code;
 }

@@ -106,6 +106,14 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
 
 // info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,
 // which is what extract --eps 0 writes.
+// What a command prints is its result: one that cannot be written is a failure (exit 1).
+TEST(Cli, AnUnwritableStandardOutputFails) {
+  for (const std::string cmd : {"tets", "tets --json", "info --volume sphere:9 --no-cache"}) {
+    EXPECT_EQ(Cli(cmd + " >/dev/null").code, 0) << cmd;
+    EXPECT_EQ(Cli(cmd + " >/dev/full").code, 1) << cmd;
+  }
+}
+
 TEST(Cli, InfoPrintsTheTriangleCountByEps) {
   const CliRun r = Cli("info --volume buckyball:33 --iso 0.05,0.15 --no-cache");
   ASSERT_EQ(r.code, 0) << r.output;
