@@ -17,8 +17,9 @@ absl::StatusOr<std::string> ReadTlsCa(const std::string& path) {
   if (!pem.ok())
     return absl::InvalidArgumentError("cannot read --tls-ca '" + path +
                                       "': " + std::string(pem.status().message()));
-  if (pem->empty())
-    return absl::InvalidArgumentError("--tls-ca '" + path + "' holds no certificates");
+  // gRPC takes anything else as an empty list of roots and fails the connection attempt.
+  if (pem->find("-----BEGIN CERTIFICATE-----") == std::string::npos)
+    return absl::InvalidArgumentError("--tls-ca '" + path + "' holds no certificates (PEM)");
   return std::move(*pem);
 }
 

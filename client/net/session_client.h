@@ -37,7 +37,8 @@ struct ClientOptions {
 };
 
 // The PEM root certificates in `path`, for ClientOptions::tls_ca_pem. InvalidArgument for a
-// file that cannot be read or holds nothing (an empty PEM would silently mean plaintext).
+// file that cannot be read or holds no PEM certificate (an empty one would silently mean
+// plaintext; any other gRPC reports only as a failure to connect).
 absl::StatusOr<std::string> ReadTlsCa(const std::string& path);
 
 // The message for a failed call, with a hint where the code alone says little: UNAVAILABLE

@@ -216,6 +216,12 @@ TEST(View, ConnectsOverTlsWithItsCa) {
   const ViewRun no_ca = View(common + " --tls-ca " + empty);
   EXPECT_NE(no_ca.code, 0);
   EXPECT_NE(no_ca.output.find("holds no certificates"), std::string::npos) << no_ca.output;
+  const std::string text = dir.path() + "/not-pem.txt";
+  std::ofstream(text) << "root:x:0:0:root:/root:/bin/bash\n";
+  const ViewRun not_pem = View(common + " --tls-ca " + text);
+  EXPECT_EQ(not_pem.code, 2) << not_pem.output;
+  EXPECT_NE(not_pem.output.find("'" + text + "' holds no certificates (PEM)"), std::string::npos)
+      << not_pem.output;
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
