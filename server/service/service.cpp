@@ -93,17 +93,16 @@ struct ServiceCore {
     std::lock_guard<std::mutex> lock(streams_mu);
     streams[s] = std::move(w);
   }
-  // Forgets a stream gRPC is done with; `release_slot`: it no longer runs a frame job either.
-  void Unregister(StreamBase* s, bool release_slot) {
+  // Forgets a stream gRPC is done with.
+  void Unregister(StreamBase* s) {
     {
       std::lock_guard<std::mutex> lock(streams_mu);
       streams.erase(s);
     }
     streams_cv.notify_all();
-    if (release_slot) ReleaseSlot();
   }
-  // Gives back what Admit took: at the end of a stream, of its frame job if that outlived it,
-  // or of a volume-info call.
+  // Gives back what Admit took: as a stream finishes (or its frame job ends, if that outlived
+  // the finish), or before a volume-info call finishes.
   void ReleaseSlot() {
     counters.sessions_open.fetch_sub(1);
     counters.sessions_closed.fetch_add(1);
@@ -315,15 +314,12 @@ class ChunkStream : public Reactor, public StreamBase {
 
   void OnDone() override {
     if (admitted_) spdlog::debug("{}: stream closed ({})", peer_, finish_status_.error_message());
-    // A frame job still running (cancelled, winding down) keeps the slot until it ends:
-    // otherwise clients that leave at once could keep any number of jobs running.
-    bool release;
     {
       std::lock_guard<std::mutex> lock(mu_);
       done_ = true;
-      release = admitted_ && !job_running_;
+      if (!job_running_) ReleaseSlotLocked();  // already, once Finish was taken
     }
-    core_->Unregister(this, release);
+    core_->Unregister(this);
     std::shared_ptr<StreamBase> keep = std::move(self_);  // may destroy *this on return
   }
 
@@ -380,7 +376,7 @@ class ChunkStream : public Reactor, public StreamBase {
   // Runs the pending view, then any view that arrived meanwhile (only the latest is kept),
   // on a frame-pool thread. One job per stream at a time.
   void RunJobs() override {
-    bool release_slot = false;
+    bool gone = false;  // gRPC is done with the call
     for (;;) {
       pb::ViewRequest view;
       ExtractRequest request;
@@ -392,7 +388,8 @@ class ChunkStream : public Reactor, public StreamBase {
         if (!pending_ || finishing_) {
           pending_.reset();
           job_running_ = false;
-          release_slot = done_ && admitted_;  // OnDone left the slot to this job
+          if (finish_called_ || done_) ReleaseSlotLocked();  // the stream left it to this job
+          gone = done_;
           last_activity_ = Clock::now();
           CompleteIfIdleLocked();
           break;
@@ -416,10 +413,7 @@ class ChunkStream : public Reactor, public StreamBase {
         }
       }
     }
-    if (release_slot) {
-      core_->ReleaseSlot();
-      return;  // gRPC is done with the call: nothing to finish
-    }
+    if (gone) return;  // nothing to finish
     std::optional<grpc::Status> finish;
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -494,7 +488,18 @@ class ChunkStream : public Reactor, public StreamBase {
   std::optional<grpc::Status> TakeFinishLocked() {
     if (!finishing_ || finish_called_ || write_in_flight_ || cancelling_) return std::nullopt;
     finish_called_ = true;
+    if (!job_running_) ReleaseSlotLocked();
     return finish_status_;
+  }
+
+  // The slot goes back as the stream is finished, before the client can see its status (gRPC
+  // calls OnDone only after that, and a client opening its next session at once was refused
+  // for a slot still held), but not while a frame job runs: a cancelled job keeps it until it
+  // ends, or clients that leave at once could keep any number of jobs running.
+  void ReleaseSlotLocked() {
+    if (!admitted_ || slot_released_) return;
+    slot_released_ = true;
+    core_->ReleaseSlot();
   }
 
   // Writes writing_'s bytes (gRPC reads them until OnWriteDone; every call writes bytes,
@@ -557,6 +562,7 @@ class ChunkStream : public Reactor, public StreamBase {
   bool draining_ = false;
   bool finishing_ = false;
   bool finish_called_ = false;
+  bool slot_released_ = false;
   grpc::Status finish_status_;
   // Last request read, write completed or frame job ended; the idle clock runs from here.
   Clock::time_point last_activity_ = Clock::now();

@@ -437,6 +437,29 @@ TEST_F(OneSlotDaemon, ACancelledJobHoldsItsSlotUntilItEnds) {
   if (refused == 0) GTEST_SKIP() << "the preparation ended before the first call";
 }
 
+// A client doing one thing at a time never meets its own last session still holding the only
+// slot: the slot goes back before the client sees the stream's status (it went back when gRPC
+// called OnDone, a few ms later, and a session or call opened at once was refused).
+TEST_F(OneSlotDaemon, OneCallAtATimeIsNeverRefused) {
+  auto c = Connect();
+  for (int i = 0; i < 100; ++i) {
+    auto session = c->OpenSession();
+    ASSERT_TRUE(session.ok());
+    if (i % 2 == 0) {  // half of them draw a frame first
+      ASSERT_TRUE((*session)->Send(MakeView("sphere:17", i + 1, 0.01, glm::dvec3(3, 2, 4))).ok());
+      net::FrameAssembler frames;
+      pb::FrameChunk chunk;
+      while (!frames.complete() && (*session)->Read(&chunk)) ASSERT_TRUE(frames.Add(chunk).ok());
+      EXPECT_TRUE(frames.complete()) << i;
+    }
+    ASSERT_TRUE((*session)->CloseSend().ok());
+    const absl::Status ended = (*session)->Finish();
+    ASSERT_TRUE(ended.ok()) << i << ": " << ended;
+    const absl::Status info = c->GetVolumeInfo("sphere:17").status();
+    ASSERT_TRUE(info.ok()) << i << ": " << info;
+  }
+}
+
 // Flags it would have to misread stop isostreamd before it listens, exit 2 and say why.
 TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
   const std::pair<std::string, std::string> refused[] = {
