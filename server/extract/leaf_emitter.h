@@ -209,8 +209,9 @@ class LeafEmitter {
     const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
     glm::vec3 grad;
     if (share) {
-      const glm::vec3 g = glm::mix(GridGradient(a), GridGradient(b), tt);
-      grad = glm::dot(g, g) != 0 ? g : glm::vec3(LeafGradient(t));
+      const glm::vec3 ga = GridGradient(a), gb = GridGradient(b);
+      grad = glm::mix(ga, gb, tt);
+      if (glm::dot(grad, grad) == 0) grad = FlatDataGradient(ga, gb, d, fa, fb);
     } else {
       grad = glm::vec3(t.g);
     }
@@ -219,7 +220,7 @@ class LeafEmitter {
     const glm::vec3 nrm =
         len2 >= std::numeric_limits<float>::min() && len2 <= std::numeric_limits<float>::max()
             ? grad * (-1.0f / std::sqrt(len2))
-            : NormalInDouble(t, a, b, tt, share);
+            : NormalInDouble(t, a, b, fa, fb, tt, share);
     float* p = out_->positions.Extend(3);
     p[0] = pw.x, p[1] = pw.y, p[2] = pw.z;
     float* q = out_->normals.Extend(3);
@@ -233,13 +234,13 @@ class LeafEmitter {
   // near FLT_MAX overflow it; tiny gradients, below ~1e-19 per world unit, underflow it): the
   // same gradient in double, (0, 0, 0) only where the data are flat.
   __attribute__((noinline)) glm::vec3 NormalInDouble(const Node& t, const glm::ivec3& a,
-                                                     const glm::ivec3& b, float tt,
-                                                     bool share) const {
+                                                     const glm::ivec3& b, float fa, float fb,
+                                                     float tt, bool share) const {
     glm::dvec3 g;
     if (share) {
       const glm::dvec3 ga = GridGradient<double>(a), gb = GridGradient<double>(b);
-      const glm::dvec3 mixed = glm::mix(ga, gb, double(tt));
-      g = glm::dot(mixed, mixed) != 0 ? mixed : LeafGradient(t);
+      g = glm::mix(ga, gb, double(tt));
+      if (glm::dot(g, g) == 0) g = FlatDataGradient(ga, gb, b - a, fa, fb);
     } else {
       g = t.g;  // set for every leaf when normals are flat (a block leaf's only then)
     }
@@ -248,6 +249,21 @@ class LeafEmitter {
     if (!(scale > 0) || !std::isfinite(scale)) return glm::vec3(0.0f);
     g /= scale;  // no overflow in the squares below
     return glm::vec3(g * (-1.0 / std::sqrt(glm::dot(g, g))));
+  }
+
+  // A shared vertex's gradient where central differences blend to zero (flat data, such as a
+  // terrace at the isovalue, where the vertex sits on a corner whose neighbours all equal
+  // it): from the edge alone, so that whichever tetrahedron makes the vertex, in whatever
+  // view, makes the same normal (the making leaf's gradient made normals depend on the view).
+  // Both ends' differences if they do not cancel, else the edge's own slope, never zero on a
+  // crossed edge (d from a to b, fa != fb).
+  template <typename T>
+  static glm::vec<3, T> FlatDataGradient(const glm::vec<3, T>& ga, const glm::vec<3, T>& gb,
+                                         const glm::ivec3& d, float fa, float fb) {
+    const glm::vec<3, T> sum = ga + gb;
+    if (glm::dot(sum, sum) != 0) return sum;
+    const glm::vec<3, T> dir(d);
+    return (T(fb) - T(fa)) / glm::dot(dir, dir) * dir;
   }
 
   // Central differences of the samples at a grid point, one-sided on the cube's faces, in

@@ -42,6 +42,11 @@ inline float BlobsField(double x, double y, double z) {
   };
   return float(g(-0.3, -0.2, 0.1, 0.35) + g(0.35, 0.25, -0.1, 0.3) + 0.8 * g(0.0, 0.3, 0.35, 0.25));
 }
+// Nested terraces, flat between steps at multiples of 0.25: an isovalue on a terrace (0.5)
+// meets corners at exactly the isovalue, where central differences vanish.
+inline float TerracesField(double x, double y, double z) {
+  return float(std::floor(4 * std::sqrt(x * x + y * y + z * z)) / 4);
+}
 inline float CayleyField(double x, double y, double z) {
   return float(16 * x * y * z + 4 * (x + y + z) - 1);
 }
