@@ -19,9 +19,11 @@ std::string Quoted(const std::string& name) {
   return "'" + name.substr(0, kShown) + "...' (" + std::to_string(name.size()) + " bytes)";
 }
 
-// Decimal digits only, at most `max_digits` of them (so that they parse without overflow).
+// Decimal digits only, at most `max_digits` of them (so that they parse without overflow), and
+// no leading zero: one number, one spelling, so "sphere:065" cannot be prepared and held as a
+// volume of its own beside "sphere:65".
 bool AllDigits(const std::string& s, size_t max_digits = 9) {
-  return !s.empty() && s.size() <= max_digits &&
+  return !s.empty() && s.size() <= max_digits && (s[0] != '0' || s.size() == 1) &&
          std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
 }
 

@@ -142,9 +142,12 @@ TEST(Catalogue, GeneratorNamesOnlyWithinTheLimit) {
   // Seeds cover [0, 2^32), as the CLI's generators take them.
   EXPECT_TRUE(generators.Check("noise:33:2147483648").ok());
   EXPECT_TRUE(generators.Check("noise:33:4294967295").ok());
+  EXPECT_TRUE(generators.Check("noise:33:0").ok());
   for (const char* bad : {"buckyball:66", "buckyball:1", "buckyball", "buckyball:6x", "sphere:9:1",
                           "/etc/passwd", "x.vdb", "raw:/a:2x2x2:f32",
-                          "noise:9:", "noise:9:4294967296", "noise:9:99999999999", "noise:9:-1"})
+                          "noise:9:", "noise:9:4294967296", "noise:9:99999999999", "noise:9:-1",
+                          // one spelling per volume: these would be prepared again, and held
+                          "sphere:065", "sphere:0065", "noise:33:0007", "noise:033:7"})
     EXPECT_EQ(generators.Check(bad).code(), absl::StatusCode::kNotFound) << bad;
   o.volumes = {{"head", "/data/head.nii.gz"}};
   VolumeCatalogue named(o);
