@@ -214,14 +214,15 @@ absl::StatusOr<pb::ServerStats> Client::GetServerStats() {
   return response;
 }
 
-absl::StatusOr<bool> Client::CheckHealth() {
+absl::StatusOr<bool> Client::CheckHealth(const std::string& service) {
   auto stub = grpc::health::v1::Health::NewStub(channel_);
   grpc::ClientContext context;
   if (options_.call_timeout.count() > 0)
     context.set_deadline(std::chrono::system_clock::now() + options_.call_timeout);
+  grpc::health::v1::HealthCheckRequest request;
+  request.set_service(service);
   grpc::health::v1::HealthCheckResponse response;
-  ISOSTREAM_RETURN_IF_ERROR(
-      FromGrpc(stub->Check(&context, grpc::health::v1::HealthCheckRequest(), &response)));
+  ISOSTREAM_RETURN_IF_ERROR(FromGrpc(stub->Check(&context, request, &response)));
   return response.status() == grpc::health::v1::HealthCheckResponse::SERVING;
 }
 

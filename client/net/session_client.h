@@ -115,8 +115,9 @@ class Client {
   absl::StatusOr<pb::ListVolumesResponse> ListVolumes();
   absl::StatusOr<pb::VolumeInfo> GetVolumeInfo(const std::string& name, int histogram_bins = 0);
   absl::StatusOr<pb::ServerStats> GetServerStats();
-  // grpc.health.v1 Check for the whole server: true when SERVING.
-  absl::StatusOr<bool> CheckHealth();
+  // grpc.health.v1 Check for the whole server ("") or one service by its full name: true when
+  // SERVING.
+  absl::StatusOr<bool> CheckHealth(const std::string& service = "");
 
   // One frame through Extract: returns the requested (refined) frame; `on_chunk`, if set, sees
   // every chunk as it arrives, coarse ones included.

@@ -6,6 +6,7 @@
 // new streams, lets frames in flight finish (bounded wait) and exits 0.
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <google/protobuf/stubs/logging.h>
 #include <grpcpp/security/server_credentials.h>
 #include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -32,6 +33,17 @@ bool ReadFile(const std::string& path, std::string* out) {
   s << in.rdbuf();
   *out = s.str();
   return true;
+}
+
+// protobuf's own messages (one per request whose string field is not UTF-8, say) went to
+// stderr unformatted, so any client could flood the log: they go to the log at debug level (the
+// client already gets INVALID_ARGUMENT for such a request).
+void ProtobufLog(google::protobuf::LogLevel level, const char* file, int line,
+                 const std::string& message) {
+  if (level >= google::protobuf::LOGLEVEL_FATAL)
+    spdlog::critical("protobuf {}:{}: {}", file, line, message);
+  else
+    spdlog::debug("protobuf {}:{}: {}", file, line, message);
 }
 
 int Run(const DaemonConfig& config) {
@@ -87,6 +99,10 @@ int Run(const DaemonConfig& config) {
                      config.listen);
     return 1;
   }
+  // Health checks that name the service (as Kubernetes' gRPC probes may) see it too, not only
+  // the whole server's "".
+  if (auto* health = server->GetHealthCheckService())
+    health->SetServingStatus(isostream::v1::Isostream::service_full_name(), true);
   const std::string host = config.listen.substr(0, config.listen.rfind(':'));
   std::printf("listening on %s:%d\n", host.c_str(), port);
   std::fflush(stdout);
@@ -127,6 +143,7 @@ int main(int argc, char** argv) {
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   signal(SIGPIPE, SIG_IGN);
+  google::protobuf::SetLogHandler(&ProtobufLog);
 
   CLI::App app{
       "isostreamd: streams view-ordered transparent isosurfaces over gRPC.\n"

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cmath>
 #include <fstream>
+#include <iterator>
 #include <random>
 #include <sstream>
 #include <thread>
@@ -26,6 +27,9 @@ TEST_F(Daemon, HealthServingAndCatalogue) {
   auto health = c->CheckHealth();
   ASSERT_TRUE(health.ok()) << health.status();
   EXPECT_TRUE(*health);
+  auto by_name = c->CheckHealth("isostream.v1.Isostream");
+  ASSERT_TRUE(by_name.ok()) << by_name.status();
+  EXPECT_TRUE(*by_name);
   auto list = c->ListVolumes();
   ASSERT_TRUE(list.ok()) << list.status();
   EXPECT_TRUE(list->generators_allowed());
@@ -565,6 +569,17 @@ TEST_F(Daemon, RequestBytesThatDoNotParseAreInvalidArgument) {
       EXPECT_EQ(messages, 0) << method;
     }
   }
+  // A volume name that is not UTF-8: refused, and not one unformatted protobuf line in the
+  // log per request (any client could flood it that way).
+  const std::string not_utf8("\x0a\x02\xff\xfe", 4);
+  for (int i = 0; i < 3; ++i) {
+    const auto [status, messages] =
+        RawCall(daemon_->address(), "/isostream.v1.Isostream/Extract", not_utf8);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
+  }
+  std::ifstream log(scratch_->path() + "/isostreamd.log");
+  const std::string text((std::istreambuf_iterator<char>(log)), {});
+  EXPECT_EQ(text.find("libprotobuf"), std::string::npos) << text;
   auto health = Connect()->CheckHealth();
   ASSERT_TRUE(health.ok()) << health.status();
   EXPECT_TRUE(*health);
