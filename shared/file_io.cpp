@@ -93,6 +93,22 @@ absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
   return absl::OkStatus();
 }
 
+absl::Status CheckOutputPath(const std::string& path) {
+  struct stat st;
+  const bool exists = ::stat(path.c_str(), &st) == 0;
+  if (exists && S_ISDIR(st.st_mode))
+    return absl::InvalidArgumentError(absl::StrCat(path, " is a directory"));
+  if (exists && !S_ISREG(st.st_mode)) return absl::OkStatus();  // a device: written in place
+  const size_t slash = path.rfind('/');
+  const std::string folder = slash == std::string::npos ? "." : path.substr(0, slash + 1);
+  if (::stat(folder.c_str(), &st) != 0 || !S_ISDIR(st.st_mode))
+    return absl::NotFoundError(absl::StrCat("cannot create ", path, ": no folder ", folder));
+  if (::access(folder.c_str(), W_OK) == 0 || (exists && ::access(path.c_str(), W_OK) == 0))
+    return absl::OkStatus();
+  return absl::PermissionDeniedError(absl::StrCat("cannot create ", path, ": ", folder,
+                                                  " is not writable"));
+}
+
 bool FlushStandardOutput(const char* program) {
   std::cout.flush();
   const bool written = std::fflush(stdout) == 0 && !std::ferror(stdout) && std::cout.good();

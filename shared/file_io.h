@@ -20,6 +20,11 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path);
 // directory where no new file can be made.
 absl::Status WriteFileBytes(const std::string& path, std::string_view bytes);
 
+// Whether WriteFileBytes could write `path`, checked before the work that produces its bytes:
+// InvalidArgument for a directory, NotFound for a missing folder, PermissionDenied for a
+// folder (and file) that cannot be written. A final write may still fail (a full disk).
+absl::Status CheckOutputPath(const std::string& path);
+
 // Flushes standard output (C stdio and iostreams); false, after saying so on standard error as
 // `program`, if what the program printed could not all be written (a full disk, /dev/full).
 bool FlushStandardOutput(const char* program);

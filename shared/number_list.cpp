@@ -75,4 +75,10 @@ std::string ShortestText(double v) {
   return std::string(text, result.ptr);
 }
 
+std::string ShortestText(float v) {
+  char text[32];
+  const auto result = std::to_chars(text, text + sizeof(text), v == 0 ? 0.0f : v);
+  return std::string(text, result.ptr);
+}
+
 }  // namespace isostream

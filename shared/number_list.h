@@ -29,5 +29,7 @@ absl::Status CheckPort(std::string_view address, bool required);
 // user may paste back, such as the eps a budget search found (printed to 6 digits, that eps
 // gave another mesh).
 std::string ShortestText(double v);
+// The same for a float (an isovalue): "0.1", where its double would print 0.10000000149011612.
+std::string ShortestText(float v);
 
 }  // namespace isostream

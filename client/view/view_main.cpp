@@ -200,6 +200,9 @@ int Run(const Args& args) {
   if (!out.empty() && !absl::EndsWithIgnoreCase(out, ".png"))
     return Fail(
         absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" + out + "'"));
+  if (!out.empty())
+    if (const absl::Status writable = CheckOutputPath(out); !writable.ok())
+      return Fail(absl::InvalidArgumentError(writable.message()));  // an argument: exit 2
   int width = 0, height = 0;
   const absl::Status size_ok = ParseImageSize(args.size, "--size", 16384, &width, &height);
   if (!size_ok.ok()) return Fail(size_ok);
@@ -251,6 +254,14 @@ int Run(const Args& args) {
     auto parsed = ParseNumbers(args.iso, "--iso");
     if (!parsed.ok()) return Fail(parsed.status());
     iso = *parsed;
+    for (const double v : iso)
+      if (!(v >= info->min_value() && v <= info->max_value()))
+        std::fprintf(stderr,
+                     "isostream-view: note: isovalue %s lies outside %s's values [%s, %s]: no "
+                     "surface for it\n",
+                     ShortestText(v).c_str(), args.volume.c_str(),
+                     ShortestText(info->min_value()).c_str(),
+                     ShortestText(info->max_value()).c_str());
   }
   render::Camera base;
   base.aspect = float(width) / float(height);

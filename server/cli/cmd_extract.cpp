@@ -6,6 +6,7 @@
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
 #include "server/extract/extractor.h"
+#include "shared/file_io.h"
 #include "shared/glb_writer.h"
 #include "shared/number_list.h"
 #include "shared/ply_io.h"
@@ -43,6 +44,11 @@ int RunExtract(const ExtractArgs& args) {
     std::cerr << "isostream extract: -o must end in .ply or .glb, got '" << args.output << "'\n";
     return 2;
   }
+  // Before the volume is prepared and the frame extracted, which may take minutes.
+  if (const absl::Status out = CheckOutputPath(args.output); !out.ok()) {
+    std::cerr << "isostream extract: " << out.message() << "\n";
+    return 2;
+  }
   auto prepared = Prepare(args.volume);
   if (!prepared.ok()) {
     std::cerr << "isostream extract: " << prepared.status().message() << "\n";
@@ -54,6 +60,12 @@ int RunExtract(const ExtractArgs& args) {
     return 2;
   }
   request->threads = args.volume.threads;
+  for (const float iso : request->isovalues)
+    if (!(iso >= prepared->volume->min_value && iso <= prepared->volume->max_value))
+      std::fprintf(stderr, "isostream extract: note: isovalue %s lies outside the volume's "
+                   "values [%s, %s]: no surface for it\n",
+                   ShortestText(iso).c_str(), ShortestText(prepared->volume->min_value).c_str(),
+                   ShortestText(prepared->volume->max_value).c_str());
   auto result = Extract(*prepared->hierarchy, prepared->grid_to_world, *request);
   if (!result.ok()) {
     std::cerr << "isostream extract: " << result.status().message() << "\n";

@@ -7,6 +7,7 @@
 #include "client/net/session_client.h"
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
+#include "shared/file_io.h"
 #include "shared/number_list.h"
 #include "shared/ply_io.h"
 
@@ -70,6 +71,8 @@ int RunFetch(const FetchArgs& args) {
   };
   if (args.output.size() < 4 || args.output.compare(args.output.size() - 4, 4, ".ply") != 0)
     return fail("-o must end in .ply, got '" + args.output + "'", 2);
+  if (const absl::Status writable = CheckOutputPath(args.output); !writable.ok())
+    return fail(std::string(writable.message()), 2);
   net::ClientOptions options;
   options.address = args.server;
   options.token = args.token;

@@ -102,6 +102,29 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
     EXPECT_EQ(r.code, 2) << ca;
     EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
   }
+  // Outputs that cannot be written are refused before the volume is prepared (cayley:4097
+  // would take minutes and 270 GB), not after the frame was extracted.
+  const std::string folder_named_ply = TempPath("cli-folder.ply");
+  std::filesystem::create_directories(folder_named_ply);
+  for (const auto& [o, message] :
+       {std::pair<std::string, std::string>{"/no/such/dir/x.ply", "no folder /no/such/dir/"},
+        {folder_named_ply, "is a directory"}}) {
+    const CliRun r = Cli("extract --volume cayley:4097 --iso 0.5 --eps 0 --no-cache -o " + o);
+    EXPECT_EQ(r.code, 2) << o << "\n" << r.output;
+    EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
+  }
+}
+
+// An isovalue the volume never reaches draws nothing; the user is told so (a typo such as
+// "--iso 0,5" for 0.5 read as two isovalues, 0 and 5, gave a silently empty mesh).
+TEST(Cli, IsovaluesOutsideTheDataAreNamed) {
+  const CliRun r = Cli("extract --volume sphere:17 --iso 0,5 --eps 0 --no-cache -o " +
+                       TempPath("cli-outside.ply"));
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("isovalue 5 lies outside the volume's values [0, 1.7"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("isovalue 0 lies"), std::string::npos) << r.output;
 }
 
 // info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,

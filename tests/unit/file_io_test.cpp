@@ -89,5 +89,17 @@ TEST_F(FileIo, LinksDevicesAndDirectories) {
   EXPECT_EQ(no_folder.code(), absl::StatusCode::kNotFound) << no_folder;
 }
 
+TEST_F(FileIo, OutputPathsAreCheckedBeforeTheWork) {
+  EXPECT_TRUE(CheckOutputPath(Path("new.ply")).ok());
+  EXPECT_TRUE(CheckOutputPath("/dev/null").ok());
+  EXPECT_EQ(CheckOutputPath(dir_).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(CheckOutputPath(Path("missing/new.ply")).code(), absl::StatusCode::kNotFound);
+  if (geteuid() == 0) GTEST_SKIP() << "root writes into read-only folders";
+  fs::create_directory(Path("locked"));
+  fs::permissions(Path("locked"), fs::perms::owner_read | fs::perms::owner_exec);
+  EXPECT_EQ(CheckOutputPath(Path("locked/new.ply")).code(), absl::StatusCode::kPermissionDenied);
+  fs::permissions(Path("locked"), fs::perms::owner_all);
+}
+
 }  // namespace
 }  // namespace isostream
