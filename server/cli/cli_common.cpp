@@ -60,6 +60,7 @@ void AddViewOptions(CLI::App* cmd, ViewArgs* args) {
   auto* eye = cmd->add_option("--eye", args->eye, "perspective eye x,y,z (world units)");
   auto* dir = cmd->add_option("--view-dir", args->view_dir, "orthographic view direction x,y,z");
   eye->excludes(dir);
+  args->eps_flag = eps;
   args->budget_flag = budget;
   args->eye_flag = eye;
   args->view_dir_flag = dir;
@@ -96,8 +97,10 @@ absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& v
     if (args.budget <= 0)
       return absl::InvalidArgumentError("--budget must be a positive triangle count");
     r.budget = args.budget;
-  } else if (args.eps < 0 || !std::isfinite(args.eps)) {
+  } else if (!given(args.eps_flag)) {
     return absl::InvalidArgumentError("give --eps E (>= 0, data units) or --budget N");
+  } else if (args.eps < 0 || !std::isfinite(args.eps)) {
+    return absl::InvalidArgumentError("--eps must be a finite number >= 0 (data units)");
   } else {
     r.eps = args.eps;
   }

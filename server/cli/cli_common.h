@@ -31,6 +31,7 @@ struct ViewArgs {
   std::string eye, view_dir;
   // Whether the flag was given at all (an empty or negative value is then an error, not
   // "absent"); set by AddViewOptions.
+  const CLI::Option* eps_flag = nullptr;
   const CLI::Option* budget_flag = nullptr;
   const CLI::Option* eye_flag = nullptr;
   const CLI::Option* view_dir_flag = nullptr;

@@ -7,6 +7,7 @@
 
 #include "server/volume/loaders.h"
 #include "server/volume/sample_reader.h"
+#include "shared/number_list.h"
 
 namespace isostream {
 namespace {
@@ -152,8 +153,9 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
 
   const float vox_offset = h.F32(kVoxOffsetOffset);
   if (!(vox_offset >= kHeaderSize) || vox_offset > 1e9f) {
-    return absl::InvalidArgumentError(path + ": vox_offset " + std::to_string(vox_offset) +
-                                      " is not past the 348-byte header");
+    return absl::InvalidArgumentError(path + ": vox_offset " + ShortestText(vox_offset) +
+                                      (vox_offset > 1e9f ? " is past any file this loader reads"
+                                                         : " is not past the 348-byte header"));
   }
   ISOSTREAM_RETURN_IF_ERROR(input.Skip(static_cast<size_t>(vox_offset) - kHeaderSize));
 

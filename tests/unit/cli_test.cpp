@@ -59,7 +59,8 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
       {"info --volume /no/such/file.nii", "/no/such/file.nii"},
       {"info --volume nosuch:33", "unknown generator"},
       {"extract --volume sphere:17 --iso 0.5 --budget 0 -o " + out, "--budget"},
-      {"extract --volume sphere:17 --iso 0.5 --eps -1 -o " + out, "--eps"},
+      {"extract --volume sphere:17 --iso 0.5 --eps -1 -o " + out, "--eps must be a finite"},
+      {"extract --volume sphere:17 --iso 0.5 --eps inf -o " + out, "--eps must be a finite"},
       {"extract --volume sphere:17 --iso 0.5 -o " + out, "--eps"},
       {"extract --volume sphere:17 --iso 1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17 --eps 0 -o " +
            out,
