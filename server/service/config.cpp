@@ -16,7 +16,12 @@ using nlohmann::json;
 
 absl::Status CheckKeys(const json& object, const std::set<std::string>& known,
                        const std::string& where) {
-  if (!object.is_object()) return absl::InvalidArgumentError(where + " must be an object");
+  if (!object.is_object()) {
+    // `where` is the key's prefix ("tls."), empty for the whole file.
+    const std::string what =
+        where.empty() ? "the configuration" : "'" + where.substr(0, where.size() - 1) + "'";
+    return absl::InvalidArgumentError(what + " must be a JSON object");
+  }
   for (auto it = object.begin(); it != object.end(); ++it)
     if (!known.count(it.key()))
       return absl::InvalidArgumentError("unknown key '" + where + it.key() + "'");

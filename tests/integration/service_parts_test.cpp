@@ -114,6 +114,8 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
   EXPECT_NE(message(R"({"shutdown_grace_ms": -1})").find("shutdown_grace_ms"), std::string::npos);
   EXPECT_NE(message(R"({"log_level": "shouty"})").find("log_level"), std::string::npos);
   EXPECT_EQ(message(R"({"log_level": "warn"})"), "");
+  EXPECT_NE(message("[]").find("the configuration must be a JSON object"), std::string::npos);
+  EXPECT_NE(message(R"({"tls": 5})").find("'tls' must be a JSON object"), std::string::npos);
   for (const char* listen : {"127.0.0.1:70000", "127.0.0.1:65536", "127.0.0.1", "127.0.0.1:", ":80",
                              "127.0.0.1:-1", "127.0.0.1:8o"})
     EXPECT_NE(message(std::string(R"({"listen": ")") + listen + "\"}").find("listen"),
