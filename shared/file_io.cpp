@@ -62,6 +62,7 @@ absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
   struct stat st;
   const bool exists = ::stat(path.c_str(), &st) == 0;
   if (exists && !S_ISREG(st.st_mode)) return WriteInPlace(path, bytes);
+  const mode_t previous_mode = st.st_mode & 07777;
   std::string target = path;
   if (exists && ::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
     char resolved[PATH_MAX];
@@ -78,6 +79,8 @@ absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
     if (errno == EACCES || errno == EROFS || errno == EPERM) return WriteInPlace(path, bytes);
     return absl::ErrnoToStatus(errno, absl::StrCat("cannot create ", path));
   }
+  // A file made private stays private when replaced.
+  if (exists) (void)::fchmod(fd, previous_mode);
   std::FILE* file = ::fdopen(fd, "wb");
   if (file == nullptr) {
     const int error = errno;

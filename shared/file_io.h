@@ -16,8 +16,8 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path);
 // Writes `bytes` as the file at `path`, whole or not at all: into a new file beside it, renamed
 // over `path` once complete, so a failed write (a full disk, a file size limit) leaves the
 // previous file as it was and no partial one. A symbolic link's target is replaced, the link
-// kept. What is not a regular file (/dev/null, a FIFO) is written in place, as is a file in a
-// directory where no new file can be made.
+// kept, and a replaced file's permissions. What is not a regular file (/dev/null, a FIFO) is
+// written in place, as is a file in a directory where no new file can be made.
 absl::Status WriteFileBytes(const std::string& path, std::string_view bytes);
 
 // Whether WriteFileBytes could write `path`, checked before the work that produces its bytes:

@@ -112,7 +112,8 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
   // OpenVDB opens files by name. Through the descriptor's /proc entry it reads the very file
   // just checked, even if PATH has since been replaced (a catalogue updated by renaming a new
   // file over the old one); by PATH it would read the new file unchecked.
-  const std::string checked_file = "/proc/self/fd/" + std::to_string(fd);
+  std::string checked_file = "/proc/self/fd/" + std::to_string(fd);
+  if (::access(checked_file.c_str(), R_OK) != 0) checked_file = path;  // no /proc mounted
   openvdb::io::File file(checked_file);
   try {
     // Delayed loading would defer reading (and its errors) to first access, past this edge.

@@ -55,7 +55,7 @@ TEST_F(FileIo, AFailedWriteLeavesThePreviousFileAndNoPartOfTheNewOne) {
   EXPECT_EQ(Names(), std::vector<std::string>{"mesh.ply"});
 }
 
-TEST_F(FileIo, ReplacesAFileWholeWithTheUsualMode) {
+TEST_F(FileIo, ReplacesAFileWholeAndKeepsItsMode) {
   const std::string path = Path("frame.png");
   ASSERT_TRUE(WriteFileBytes(path, "one").ok());
   ASSERT_TRUE(WriteFileBytes(path, "two, longer").ok());
@@ -66,6 +66,11 @@ TEST_F(FileIo, ReplacesAFileWholeWithTheUsualMode) {
   struct stat st;
   ASSERT_EQ(stat(path.c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0666 & ~mask);
+  // A file made private stays so.
+  ASSERT_EQ(chmod(path.c_str(), 0600), 0);
+  ASSERT_TRUE(WriteFileBytes(path, "three").ok());
+  ASSERT_EQ(stat(path.c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
 }
 
 // A link stays a link (its target is replaced); a device is written in place, never renamed
