@@ -58,6 +58,17 @@ inline unsigned AboveCorners(const float* f, float iso) {
 #endif
 }
 
+// Corners whose value equals iso: their crossings sit on the corner itself.
+inline unsigned CornersAtIso(const float* f, float iso) {
+#ifdef __SSE2__
+  return unsigned(_mm_movemask_ps(_mm_cmpeq_ps(_mm_loadu_ps(f), _mm_set1_ps(iso))));
+#else
+  unsigned m = 0;
+  for (int i = 0; i < 4; ++i) m |= unsigned(f[i] == iso) << i;
+  return m;
+#endif
+}
+
 // leaf_corners: 16-byte aligned (BlockTables::leaf_corners).
 inline unsigned CrossingLeaves(const uint16_t* leaf_corners, unsigned above) {
 #ifdef __SSE2__

@@ -37,8 +37,8 @@ inline int LeafTriangles(const Context& c, const Node& t) {
   IsoRange(c, fmin, fmax, &first, &last);
   int n = 0;
   for (int s = first; s < last; ++s) {
-    const MarchingTetsCase& mc = (*c.cases)[AboveCorners(t.f, c.iso[s])];
-    if (mc.edge_count != 0) n += mc.edge_count - 2;
+    const unsigned above = AboveCorners(t.f, c.iso[s]);
+    n += (*c.cases)[above].triangles[CornersAtIso(t.f, c.iso[s]) & above];
   }
   return n;
 }

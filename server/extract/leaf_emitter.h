@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/vec3.hpp>
 #include <limits>
@@ -127,10 +128,13 @@ class LeafEmitter {
   // Marching tetrahedra for sorted isovalue index s.
   int Component(const Node& t, int s) {
     const float iso = c_.iso[s];
-    const MarchingTetsCase& mc = (*c_.cases)[AboveCorners(t.f, iso)];
+    const unsigned above = AboveCorners(t.f, iso);
+    const MarchingTetsCase& mc = (*c_.cases)[above];
     if (mc.edge_count == 0) return 0;
+    const unsigned at_iso = CornersAtIso(t.f, iso) & above;
+    if (!kEmit) return mc.triangles[at_iso];
+    if (at_iso != 0) return ComponentThroughCorners(t, s, mc, above, at_iso);
     const int count = mc.edge_count - 2;
-    if (!kEmit) return count;
     uint32_t v[4];
     const int edges = mc.edge_count;  // a local: the stores below could alias the table
     for (int i = 0; i < edges; ++i) v[i] = EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
@@ -156,6 +160,44 @@ class LeafEmitter {
       surf[1] = surface;
     }
     return count;
+  }
+
+  // A component with crossings on corners whose value is the isovalue (flat or integer data):
+  // the crossings of one such corner are one vertex, named by the corner, and a triangle left
+  // without an area is not emitted (most of a terrace's triangles had none). Out of line: rare.
+  __attribute__((noinline)) int ComponentThroughCorners(const Node& t, int s,
+                                                        const MarchingTetsCase& mc,
+                                                        unsigned above, unsigned at_iso) {
+    const int edges = mc.edge_count;
+    uint32_t v[4];
+    int where[4];  // the corner a crossing sits on, or 4 + its edge
+    for (int i = 0; i < edges; ++i) {
+      where[i] = CrossingPlace(mc, above, at_iso, i);
+      const int a = mc.edge[i][0], b = mc.edge[i][1];
+      v[i] = where[i] < 4 ? CornerVertex(t, where[i], where[i] == a ? b : a, s)
+                          : EdgeVertex(t, a, b, s);
+    }
+    if (edges == 4 && QuadSplitsAlong13(v)) {
+      std::rotate(v, v + 1, v + 4);
+      std::rotate(where, where + 1, where + 4);
+    }
+    const bool flip = mc.flip[c_.negative[t.cls.value]];
+    const uint8_t surface = c_.iso_surface[s];
+    const bool clip = c_.clip && !InsideDataBox(c_, t);
+    int emitted = 0;
+    for (int k = 1; k + 1 < edges; ++k) {  // the fan (0, k, k + 1)
+      if (where[0] == where[k] || where[k] == where[k + 1] || where[0] == where[k + 1]) continue;
+      const uint32_t a = v[0], b = flip ? v[k + 1] : v[k], d = flip ? v[k] : v[k + 1];
+      if (clip) {
+        ClipTriangle(a, b, d, surface);
+      } else {
+        uint32_t* out = out_->triangles.Extend(3);
+        out[0] = a, out[1] = b, out[2] = d;
+        out_->surface.Push(surface);
+      }
+      ++emitted;
+    }
+    return emitted;
   }
 
   // A quad is split along its shorter diagonal (better triangles); equal lengths are broken by
@@ -188,9 +230,22 @@ class LeafEmitter {
     return found != EdgeVertexTable::kMissing ? found : NewVertex(t, ia, ib, s, mid2, key);
   }
 
+  // The crossing on corner `in` (its value is the isovalue) of its edge to `out`: one vertex for
+  // every edge through that corner, keyed by the corner's doubled point (no edge of the
+  // conforming mesh has a vertex of it as its midpoint, so no edge key is the same).
+  uint32_t CornerVertex(const Node& t, int in, int out, int s) {
+    const PackedPoint mid2 = t.v[in] + t.v[in];
+    if (c_.normals != NormalMode::kSmooth) return NewVertex(t, in, out, s, mid2, 0, true);
+    const uint64_t key = EdgeKey(mid2, s);
+    const uint32_t found = table_->FindOrInsert(key, out_->vertices);
+    return found != EdgeVertexTable::kMissing ? found : NewVertex(t, in, out, s, mid2, key, true);
+  }
+
   // Out of line: most lookups hit, and the hit path stays small enough to inline.
+  // `on_corner`: the crossing is the end whose value is the isovalue (CornerVertex).
   __attribute__((noinline)) uint32_t NewVertex(const Node& t, int ia, int ib, int s,
-                                               PackedPoint mid2, uint64_t key) {
+                                               PackedPoint mid2, uint64_t key,
+                                               bool on_corner = false) {
     const uint32_t fresh = out_->vertices;
     const bool share = c_.normals == NormalMode::kSmooth;
     glm::ivec3 a = Unpack(t.v[ia]), b = Unpack(t.v[ib]);
@@ -211,7 +266,9 @@ class LeafEmitter {
     if (share) {
       const glm::vec3 ga = GridGradient(a), gb = GridGradient(b);
       grad = glm::mix(ga, gb, tt);
-      if (glm::dot(grad, grad) == 0) grad = FlatDataGradient(ga, gb, d, fa, fb);
+      if (glm::dot(grad, grad) == 0)
+        grad = on_corner ? CornerGradient<float>(tt == 0 ? a : b)
+                         : FlatDataGradient(ga, gb, d, fa, fb);
     } else {
       grad = glm::vec3(t.g);
     }
@@ -220,7 +277,7 @@ class LeafEmitter {
     const glm::vec3 nrm =
         len2 >= std::numeric_limits<float>::min() && len2 <= std::numeric_limits<float>::max()
             ? grad * (-1.0f / std::sqrt(len2))
-            : NormalInDouble(t, a, b, fa, fb, tt, share);
+            : NormalInDouble(t, a, b, fa, fb, tt, share, on_corner);
     float* p = out_->positions.Extend(3);
     p[0] = pw.x, p[1] = pw.y, p[2] = pw.z;
     float* q = out_->normals.Extend(3);
@@ -235,12 +292,15 @@ class LeafEmitter {
   // same gradient in double, (0, 0, 0) only where the data are flat.
   __attribute__((noinline)) glm::vec3 NormalInDouble(const Node& t, const glm::ivec3& a,
                                                      const glm::ivec3& b, float fa, float fb,
-                                                     float tt, bool share) const {
+                                                     float tt, bool share,
+                                                     bool on_corner) const {
     glm::dvec3 g;
     if (share) {
       const glm::dvec3 ga = GridGradient<double>(a), gb = GridGradient<double>(b);
       g = glm::mix(ga, gb, double(tt));
-      if (glm::dot(g, g) == 0) g = FlatDataGradient(ga, gb, b - a, fa, fb);
+      if (glm::dot(g, g) == 0)
+        g = on_corner ? CornerGradient<double>(tt == 0 ? a : b)
+                      : FlatDataGradient(ga, gb, b - a, fa, fb);
     } else {
       g = t.g;  // set for every leaf when normals are flat (a block leaf's only then)
     }
@@ -264,6 +324,29 @@ class LeafEmitter {
     if (glm::dot(sum, sum) != 0) return sum;
     const glm::vec<3, T> dir(d);
     return (T(fb) - T(fa)) / glm::dot(dir, dir) * dir;
+  }
+
+  // A corner vertex's gradient where its central differences vanish (inside a terrace): the
+  // differences to its 26 neighbours at distances 1, 2, 4, ... until some differ. From the
+  // corner alone, so that every edge through it, in every view, gives it the same normal.
+  template <typename T>
+  glm::vec<3, T> CornerGradient(const glm::ivec3& p) const {
+    const int last = c_.n - 1;
+    const T fp = F<T>(c_.ValueOffset(p));
+    for (int r = 1; r <= last; r *= 2) {
+      glm::vec<3, T> g(0);
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            if (dx == 0 && dy == 0 && dz == 0) continue;
+            const glm::ivec3 o(dx, dy, dz);
+            const glm::ivec3 q = glm::clamp(p + r * o, glm::ivec3(0), glm::ivec3(last));
+            const glm::vec<3, T> u(o);
+            g += (F<T>(c_.ValueOffset(q)) - fp) / glm::dot(u, u) * u;
+          }
+      if (glm::dot(g, g) != 0) return g;
+    }
+    return glm::vec<3, T>(0);
   }
 
   // Central differences of the samples at a grid point, one-sided on the cube's faces, in

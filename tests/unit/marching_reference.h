@@ -2,7 +2,8 @@
 // the extractor documents, to compare its output with as a set of triangles: a vertex is inside
 // when f >= iso; a crossing is interpolated from the lexicographically smaller endpoint
 // (parameter in double, point in single precision); a quad is split along its shorter diagonal
-// (ties broken by position).
+// (ties broken by position); a triangle without an area (two crossings on a corner whose value
+// is the isovalue) is left out.
 #pragma once
 
 #include <algorithm>
@@ -42,6 +43,9 @@ inline std::multiset<TriKey> MeshTriangles(const OrderedMesh& m) {
 // Adds the triangles of tetrahedron (v, f) for every isovalue (surface = index in iso).
 inline void MarchTet(const glm::ivec3 v[4], const float f[4], const std::vector<float>& iso,
                      std::multiset<TriKey>* tris) {
+  auto add = [&](int s, const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
+    if (a != b && b != c && a != c) tris->insert(MakeKey(s, {a, b, c}));
+  };
   for (size_t s = 0; s < iso.size(); ++s) {
     auto cross = [&](int i, int j) {
       glm::ivec3 a = v[i], b = v[j];
@@ -56,8 +60,7 @@ inline void MarchTet(const glm::ivec3 v[4], const float f[4], const std::vector<
     if (in.size() != 2) {
       const int lone = in.size() == 1 ? in[0] : out[0];
       const auto& rest = in.size() == 1 ? out : in;
-      tris->insert(
-          MakeKey(int(s), {cross(lone, rest[0]), cross(lone, rest[1]), cross(lone, rest[2])}));
+      add(int(s), cross(lone, rest[0]), cross(lone, rest[1]), cross(lone, rest[2]));
       continue;
     }
     glm::vec3 q[4] = {cross(in[0], out[0]), cross(in[0], out[1]), cross(in[1], out[1]),
@@ -70,8 +73,8 @@ inline void MarchTet(const glm::ivec3 v[4], const float f[4], const std::vector<
     bool along13 = d13 < d02;
     if (d02 == d13) along13 = less(less(q[1], q[3]) ? q[1] : q[3], less(q[0], q[2]) ? q[0] : q[2]);
     if (along13) std::rotate(q, q + 1, q + 4);
-    tris->insert(MakeKey(int(s), {q[0], q[1], q[2]}));
-    tris->insert(MakeKey(int(s), {q[0], q[2], q[3]}));
+    add(int(s), q[0], q[1], q[2]);
+    add(int(s), q[0], q[2], q[3]);
   }
 }
 
