@@ -378,7 +378,8 @@ int main(int argc, char** argv) {
       "isostream-view: draw isostreamd's view-ordered transparent isosurfaces (headless, PNG)"};
   app.add_option("--server", args.server, "daemon address (default 127.0.0.1:7878)");
   app.add_option("--volume", args.volume, "catalogue name, e.g. buckyball:129")->required();
-  app.add_option("--iso", args.iso, "isovalues, comma separated (default: 20/40/60% of the range)");
+  app.add_option("--iso", args.iso, "isovalues, comma separated (default: 20/40/60% of the range)")
+      ->check(isostream::GivenNumber());  // given but empty: an error, not the defaults
   const CLI::Validator given_number = isostream::GivenNumber();
   auto* eps = app.add_option("--eps", args.eps, "error bound in data units")->check(given_number);
   auto* budget = app.add_option("--budget", args.budget, "triangle budget")->check(given_number);

@@ -9,6 +9,7 @@
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
 #include "server/extract/extractor.h"
+#include "shared/given_number.h"
 #include "shared/number_list.h"
 
 namespace isostream::cli {
@@ -107,7 +108,8 @@ CLI::App* AddInfoCommand(CLI::App& app, int* exit_code) {
   AddVolumeOptions(cmd, args.get());
   cmd->add_option("--iso", *iso,
                   "isovalues, comma separated: also print the triangle count at each octave of "
-                  "eps (one counting pass at full resolution)");
+                  "eps (one counting pass at full resolution)")
+      ->check(GivenNumber());  // given but empty: an error, not "no table"
   cmd->callback([args, iso, exit_code] { *exit_code = RunInfo(*args, *iso); });
   return cmd;
 }

@@ -340,6 +340,7 @@ TEST(View, ArgumentsItCannotHonourAreRefusedBeforeAnyFrame) {
   const std::pair<std::string, std::string> refused[] = {
       {"/frame.jpg", "give a .png path"},
       {"/frame.png --eps ''", "a number is needed"},
+      {"/frame.png --iso ''", "--iso: a number is needed"},  // not the default isovalues
       {"/frame.png --exit-after 2", "--window"},
       {"/frame.png --eye 1e30,0,0", "too far"}};
   for (const auto& [args, reason] : refused) {

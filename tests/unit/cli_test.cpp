@@ -78,6 +78,7 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
       {"extract --volume sphere:17 --iso 1e300 --eps 0 -o " + out, "single-precision range"},
       {"info --volume raw:/dev/null:4x4x4:float32:xx", "byte order 'xx'"},
       {"info --volume sphere:17 --iso 0.5,1e300", "single-precision range"},
+      {"info --volume sphere:17 --iso ''", "--iso: a number is needed"},  // not "no table"
       {"fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 "
        "--max-frame-triangles 0 -o " +
            out,
