@@ -264,11 +264,8 @@ class LeafEmitter {
     const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
     glm::vec3 grad;
     if (share) {
-      const glm::vec3 ga = GridGradient(a), gb = GridGradient(b);
-      grad = glm::mix(ga, gb, tt);
-      if (glm::dot(grad, grad) == 0)
-        grad = on_corner ? CornerGradient<float>(tt == 0 ? a : b)
-                         : FlatDataGradient(ga, gb, d, fa, fb);
+      grad = glm::mix(GridGradient(a), GridGradient(b), tt);
+      if (glm::dot(grad, grad) == 0) grad = VanishedGradient<float>(a, b, fa, fb, tt, on_corner);
     } else {
       grad = glm::vec3(t.g);
     }
@@ -296,11 +293,8 @@ class LeafEmitter {
                                                      bool on_corner) const {
     glm::dvec3 g;
     if (share) {
-      const glm::dvec3 ga = GridGradient<double>(a), gb = GridGradient<double>(b);
-      g = glm::mix(ga, gb, double(tt));
-      if (glm::dot(g, g) == 0)
-        g = on_corner ? CornerGradient<double>(tt == 0 ? a : b)
-                      : FlatDataGradient(ga, gb, b - a, fa, fb);
+      g = glm::mix(GridGradient<double>(a), GridGradient<double>(b), double(tt));
+      if (glm::dot(g, g) == 0) g = VanishedGradient<double>(a, b, fa, fb, tt, on_corner);
     } else {
       g = t.g;  // set for every leaf when normals are flat (a block leaf's only then)
     }
@@ -312,11 +306,21 @@ class LeafEmitter {
   }
 
   // A shared vertex's gradient where central differences blend to zero (flat data, such as a
-  // terrace at the isovalue, where the vertex sits on a corner whose neighbours all equal
-  // it): from the edge alone, so that whichever tetrahedron makes the vertex, in whatever
-  // view, makes the same normal (the making leaf's gradient made normals depend on the view).
-  // Both ends' differences if they do not cancel, else the edge's own slope, never zero on a
-  // crossed edge (d from a to b, fa != fb).
+  // terrace at the isovalue): from the vertex's corner (on_corner: the end where tt puts it)
+  // or from its edge (a to b) alone, so that whichever tetrahedron makes the vertex, in
+  // whatever view, makes the same normal (the making leaf's gradient made normals depend on
+  // the view). Out of line: rare, and inlined it cost the vertex path ~25 instructions.
+  template <typename T>
+  __attribute__((noinline)) glm::vec<3, T> VanishedGradient(const glm::ivec3& a,
+                                                            const glm::ivec3& b, float fa,
+                                                            float fb, float tt,
+                                                            bool on_corner) const {
+    if (on_corner) return CornerGradient<T>(tt == 0 ? a : b);
+    return FlatDataGradient(GridGradient<T>(a), GridGradient<T>(b), b - a, fa, fb);
+  }
+
+  // An edge's part of VanishedGradient: both ends' differences if they do not cancel, else the
+  // edge's own slope, never zero on a crossed edge (d from a to b, fa != fb).
   template <typename T>
   static glm::vec<3, T> FlatDataGradient(const glm::vec<3, T>& ga, const glm::vec<3, T>& gb,
                                          const glm::ivec3& d, float fa, float fb) {
