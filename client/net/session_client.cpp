@@ -158,8 +158,11 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& opt
     if (ch < 0x20 || ch > 0x7e)
       return absl::InvalidArgumentError("the token must be printable ASCII characters");
   if (options.address.empty()) return absl::InvalidArgumentError("no server address given");
-  // :104903 had reached :39367, and :-1 :65535.
-  ISOSTREAM_RETURN_IF_ERROR(CheckPort(options.address, /*required=*/false));
+  // :104903 had reached :39367, and :-1 :65535; a port that is no number (127.0.0.1:abc) or
+  // none at all had gRPC try port 0 or 443. Unix socket targets have no port.
+  const bool unix_socket = options.address.rfind("unix:", 0) == 0 ||
+                           options.address.rfind("unix-abstract:", 0) == 0;
+  ISOSTREAM_RETURN_IF_ERROR(CheckPort(options.address, /*required=*/!unix_socket));
   auto c = std::unique_ptr<Client>(new Client());
   c->options_ = options;
   grpc::ChannelArguments args;

@@ -84,7 +84,9 @@ int RunFetch(const FetchArgs& args) {
     options.tls_ca_pem = std::move(*pem);
   }
   auto client = net::Client::Connect(options);
-  if (!client.ok()) return fail(std::string(client.status().message()), 1);
+  if (!client.ok())  // a bad address or token: an argument
+    return fail(std::string(client.status().message()),
+                client.status().code() == absl::StatusCode::kInvalidArgument ? 2 : 1);
 
   // The default view (no --eye, no --view-dir) depends on the volume's bounds, which only the
   // server knows; ask for them only then.

@@ -85,6 +85,7 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
            out,
        "--max-frame-triangles"},
 
+
   };
   for (const auto& c : cases) {
     const CliRun r = Cli(c.args + " --no-cache");
@@ -104,6 +105,13 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
             ca + " -o " + out);
     EXPECT_EQ(r.code, 2) << ca;
     EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
+  }
+  // A server address without a numeric port had gRPC try port 0 or 443.
+  for (const std::string server : {"127.0.0.1:abc", "localhost"}) {
+    const CliRun r =
+        Cli("fetch --server " + server + " --volume sphere:17 --iso 0.5 --eps 0 -o " + out);
+    EXPECT_EQ(r.code, 2) << server;
+    EXPECT_NE(r.output.find("'" + server + "' is not HOST:PORT"), std::string::npos) << r.output;
   }
   // Outputs that cannot be written are refused before the volume is prepared (cayley:4097
   // would take minutes and 270 GB), not after the frame was extracted.
