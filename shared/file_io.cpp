@@ -59,12 +59,21 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path) {
 }
 
 absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
-  struct stat st;
+  struct stat st, link;
   const bool exists = ::stat(path.c_str(), &st) == 0;
-  if (exists && !S_ISREG(st.st_mode)) return WriteInPlace(path, bytes);
+  const bool is_link = ::lstat(path.c_str(), &link) == 0 && S_ISLNK(link.st_mode);
+  // In place: what is not a regular file, a link to nothing yet (fopen makes its target), and
+  // a file a rename would change more than the contents of: its hard links would keep the old
+  // contents, and another user's file would become ours.
+  if ((exists && (!S_ISREG(st.st_mode) || st.st_nlink > 1 || st.st_uid != ::geteuid())) ||
+      (is_link && !exists))
+    return WriteInPlace(path, bytes);
+  // A file we may not write is not replaced either (the rename would allow it).
+  if (exists && ::access(path.c_str(), W_OK) != 0)
+    return absl::ErrnoToStatus(errno, absl::StrCat("cannot write ", path));
   const mode_t previous_mode = st.st_mode & 07777;
   std::string target = path;
-  if (exists && ::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
+  if (is_link) {
     char resolved[PATH_MAX];
     if (::realpath(path.c_str(), resolved) == nullptr) return WriteInPlace(path, bytes);
     target = resolved;
@@ -76,7 +85,8 @@ absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
       absl::StrCat(target, ".partial-", ::getpid(), "-", serial.fetch_add(1));
   const int fd = ::open(partial.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
   if (fd < 0) {
-    if (errno == EACCES || errno == EROFS || errno == EPERM) return WriteInPlace(path, bytes);
+    if (errno == EACCES || errno == EROFS || errno == EPERM || errno == ENAMETOOLONG)
+      return WriteInPlace(path, bytes);
     return absl::ErrnoToStatus(errno, absl::StrCat("cannot create ", path));
   }
   // A file made private stays private when replaced.
@@ -88,10 +98,15 @@ absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
     ::unlink(partial.c_str());
     return absl::ErrnoToStatus(error, absl::StrCat("cannot write ", path));
   }
-  if (!WriteAndClose(file, bytes) || ::rename(partial.c_str(), target.c_str()) != 0) {
+  if (!WriteAndClose(file, bytes)) {
     const int error = errno;
     ::unlink(partial.c_str());
     return absl::ErrnoToStatus(error, absl::StrCat("cannot write ", path));
+  }
+  if (::rename(partial.c_str(), target.c_str()) != 0) {
+    // Refused (a sticky folder, say): the write itself worked, so write in place instead.
+    ::unlink(partial.c_str());
+    return WriteInPlace(path, bytes);
   }
   return absl::OkStatus();
 }
@@ -106,8 +121,11 @@ absl::Status CheckOutputPath(const std::string& path) {
   const std::string folder = slash == std::string::npos ? "." : path.substr(0, slash + 1);
   if (::stat(folder.c_str(), &st) != 0 || !S_ISDIR(st.st_mode))
     return absl::NotFoundError(absl::StrCat("cannot create ", path, ": no folder ", folder));
-  if (::access(folder.c_str(), W_OK) == 0 || (exists && ::access(path.c_str(), W_OK) == 0))
-    return absl::OkStatus();
+  if (exists) {
+    if (::access(path.c_str(), W_OK) == 0) return absl::OkStatus();
+    return absl::PermissionDeniedError(absl::StrCat("cannot write ", path, ": not writable"));
+  }
+  if (::access(folder.c_str(), W_OK) == 0) return absl::OkStatus();
   return absl::PermissionDeniedError(absl::StrCat("cannot create ", path, ": ", folder,
                                                   " is not writable"));
 }

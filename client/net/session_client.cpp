@@ -30,11 +30,15 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
       // Refused: nothing listens there, so TLS is not the question.
       if (m.find("Connection refused") != std::string::npos)
         return "cannot reach isostreamd at " + options.address + " (" + m + ")";
-      // gRPC says "failed to connect" (or names the handshake) while no connection was made;
-      // otherwise one was, and broke (the daemon stopped or was killed mid-frame).
-      if (m.find("failed to connect") == std::string::npos &&
-          m.find("SETTINGS") == std::string::npos && m.find("handshake") == std::string::npos)
-        return "lost the connection to isostreamd at " + options.address + " (" + m + ")";
+      // A connection that was made and broke (the daemon stopped or was killed mid-frame)
+      // reads as one of these, without gRPC's "failed to connect"; anything else (a name
+      // that does not resolve, a TLS mismatch) is a daemon never reached.
+      if (m.find("failed to connect") == std::string::npos) {
+        for (const char* broke : {"Socket closed", "Connection reset", "Broken pipe", "GOAWAY",
+                                  "shutting down", "stream is broken"})
+          if (m.find(broke) != std::string::npos)
+            return "lost the connection to isostreamd at " + options.address + " (" + m + ")";
+      }
       return "cannot reach isostreamd at " + options.address + " (" + m + ")" +
              (options.tls_ca_pem.empty()
                   ? "; connected without TLS: if the daemon serves TLS, pass --tls-ca"
@@ -45,8 +49,12 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
     case absl::StatusCode::kNotFound:
       return m;
     case absl::StatusCode::kDeadlineExceeded:
-      return "the server did not answer within " +
-             ShortestText(double(options.call_timeout.count()) / 1000) + " s (" + m + ")";
+      // gRPC's own message: this client's deadline. The daemon's (a frame past its deadline,
+      // an idle session) say what they are.
+      if (m == "Deadline Exceeded" && options.call_timeout.count() > 0)
+        return "the server did not answer within " +
+               ShortestText(double(options.call_timeout.count()) / 1000) + " s";
+      return "DEADLINE_EXCEEDED: " + m;
     default:
       return std::string(absl::StatusCodeToString(s.code())) + ": " + m;
   }

@@ -30,8 +30,9 @@ struct ClientOptions {
   std::string tls_ca_pem;  // PEM root certificates; empty: plaintext
   // Chunks are below 4 MiB; the explicit limit leaves room for a daemon with bigger chunks.
   int max_receive_bytes = 8 << 20;
-  // Unary calls and one-shot frames fail past it, connecting included (0: no deadline; a
-  // server that accepts but never answers is then given up after gRPC's 20 s connect timeout).
+  // Unary calls and one-shot frames fail past it, connecting included (0: no deadline: a server
+  // that never completes the connection is given up after gRPC's 20 s connect timeout, one
+  // that connects and never answers is waited for).
   std::chrono::milliseconds call_timeout{30000};
   int64_t max_frame_triangles = kDefaultMaxFrameTriangles;
 };

@@ -341,7 +341,12 @@ int Run(const Args& args) {
     const pb::ViewRequest view = MakeViewRequest(state, cam, palette, i + 1);
     const auto t0 = std::chrono::steady_clock::now();
     const absl::Status sent = (*session)->Send(view);
-    if (!sent.ok()) return call_failed(sent);
+    if (!sent.ok()) {
+      // A write fails once the stream has ended: its status says why (a full daemon's
+      // RESOURCE_EXHAUSTED, say), not the failed write.
+      const absl::Status ended = (*session)->Finish();
+      return call_failed(ended.ok() ? sent : ended);
+    }
     int coarse = 0;
     auto frame = ReceiveFrame(**session, i + 1, **renderer, &coarse,
                               std::chrono::seconds(args.timeout_s), args.max_frame_triangles);

@@ -264,7 +264,10 @@ class LeafEmitter {
     const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
     glm::vec3 grad;
     if (share) {
-      grad = glm::mix(GridGradient(a), GridGradient(b), tt);
+      // On a corner, the corner's own differences: a mix weighting the other end by 0 would
+      // still turn its infinite gradient (values near FLT_MAX) into NaN, edge by edge.
+      grad = on_corner ? GridGradient(tt == 0 ? a : b)
+                       : glm::mix(GridGradient(a), GridGradient(b), tt);
       if (glm::dot(grad, grad) == 0) grad = VanishedGradient<float>(a, b, fa, fb, tt, on_corner);
     } else {
       grad = glm::vec3(t.g);
@@ -293,7 +296,8 @@ class LeafEmitter {
                                                      bool on_corner) const {
     glm::dvec3 g;
     if (share) {
-      g = glm::mix(GridGradient<double>(a), GridGradient<double>(b), double(tt));
+      g = on_corner ? GridGradient<double>(tt == 0 ? a : b)
+                    : glm::mix(GridGradient<double>(a), GridGradient<double>(b), double(tt));
       if (glm::dot(g, g) == 0) g = VanishedGradient<double>(a, b, fa, fb, tt, on_corner);
     } else {
       g = t.g;  // set for every leaf when normals are flat (a block leaf's only then)

@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <openvdb/math/Maps.h>
 #include <tbb/combinable.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -95,10 +96,11 @@ absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string
     ~Closer() {
       if (fd >= 0) close(fd);
     }
-  } opened{open(path.c_str(), O_RDONLY | O_CLOEXEC)};
-  if (opened.fd < 0) {
-    return absl::PermissionDeniedError(path + ": cannot open: " + std::strerror(errno));
-  }
+  } opened{open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK)};  // a FIFO must not block
+  if (opened.fd < 0) return absl::ErrnoToStatus(errno, path + ": cannot open");
+  struct stat st;  // what was opened, which may not be what CheckInputFile saw
+  if (fstat(opened.fd, &st) != 0 || !S_ISREG(st.st_mode))
+    return absl::InvalidArgumentError(path + ": not a regular file");
   return LoadVdbOpenFile(opened.fd, spec, path, grid_name, limits);
 }
 

@@ -42,10 +42,22 @@ TEST(ClientErrors, SayWhetherTheConnectionWasMadeOrLost) {
         << m;
     EXPECT_EQ(m.find("--tls-ca"), std::string::npos) << m;
   }
+  // A name that does not resolve was never reached.
+  const std::string unresolved = net::ExplainCallError(
+      absl::UnavailableError("DNS resolution failed for nosuchhost:7878: C-ares status is not "
+                             "ARES_SUCCESS qtype=A name=nosuchhost is_balancer=0: Domain name "
+                             "not found"),
+      o);
+  EXPECT_NE(unresolved.find("cannot reach isostreamd"), std::string::npos) << unresolved;
   o.call_timeout = std::chrono::milliseconds(2500);
   const std::string late =
       net::ExplainCallError(absl::DeadlineExceededError("Deadline Exceeded"), o);
   EXPECT_NE(late.find("did not answer within 2.5 s"), std::string::npos) << late;
+  // The daemon's own deadline is its message, not this client's timeout.
+  const std::string daemon_late = net::ExplainCallError(
+      absl::DeadlineExceededError("frame took longer than the daemon's deadline of 10000 ms"), o);
+  EXPECT_EQ(daemon_late,
+            "DEADLINE_EXCEEDED: frame took longer than the daemon's deadline of 10000 ms");
 }
 
 TEST(Config, ReadsKnownKeysAndNamesBadOnes) {

@@ -5,8 +5,11 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <string>
+#include <vector>
 
 #include "shared/file_io.h"
 
@@ -83,6 +86,18 @@ TEST_F(FileIo, LinksDevicesAndDirectories) {
   EXPECT_TRUE(fs::is_symlink(link));
   EXPECT_EQ(*ReadFileBytes(target), "new");
   EXPECT_EQ(Names(), (std::vector<std::string>{"link.glb", "target.glb"}));
+
+  // A link to nothing yet makes its target, as fopen does.
+  const std::string dangling = Path("dangling.ply"), made = Path("made.ply");
+  fs::create_symlink(made, dangling);
+  ASSERT_TRUE(WriteFileBytes(dangling, "made").ok());
+  EXPECT_TRUE(fs::is_symlink(dangling));
+  EXPECT_EQ(*ReadFileBytes(made), "made");
+  // A hard link keeps seeing the file's contents: written in place.
+  const std::string second = Path("second-name.glb");
+  fs::create_hard_link(target, second);
+  ASSERT_TRUE(WriteFileBytes(target, "newer").ok());
+  EXPECT_EQ(*ReadFileBytes(second), "newer");
 
   EXPECT_TRUE(WriteFileBytes("/dev/null", "discarded").ok());
   EXPECT_TRUE(fs::is_character_file("/dev/null"));
