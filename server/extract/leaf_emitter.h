@@ -173,9 +173,8 @@ class LeafEmitter {
     int where[4];  // the corner a crossing sits on, or 4 + its edge
     for (int i = 0; i < edges; ++i) {
       where[i] = CrossingPlace(mc, above, at_iso, i);
-      const int a = mc.edge[i][0], b = mc.edge[i][1];
-      v[i] = where[i] < 4 ? CornerVertex(t, where[i], where[i] == a ? b : a, s)
-                          : EdgeVertex(t, a, b, s);
+      v[i] = where[i] < 4 ? CornerVertex(t, where[i], s)
+                          : EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
     }
     if (edges == 4 && QuadSplitsAlong13(v)) {
       std::rotate(v, v + 1, v + 4);
@@ -230,23 +229,57 @@ class LeafEmitter {
     return found != EdgeVertexTable::kMissing ? found : NewVertex(t, ia, ib, s, mid2, key);
   }
 
-  // The crossing on corner `in` (its value is the isovalue) of its edge to `out`: one vertex for
+  // The crossings on corner `corner` (its value is the isovalue) of surface s: one vertex for
   // every edge through that corner, keyed by the corner's doubled point (no edge of the
   // conforming mesh has a vertex of it as its midpoint, so no edge key is the same).
-  uint32_t CornerVertex(const Node& t, int in, int out, int s) {
-    const PackedPoint mid2 = t.v[in] + t.v[in];
-    if (c_.normals != NormalMode::kSmooth) return NewVertex(t, in, out, s, mid2, 0, true);
+  uint32_t CornerVertex(const Node& t, int corner, int s) {
+    const PackedPoint mid2 = t.v[corner] + t.v[corner];
+    if (c_.normals != NormalMode::kSmooth) return NewCornerVertex(t, corner, mid2, 0);
     const uint64_t key = EdgeKey(mid2, s);
     const uint32_t found = table_->FindOrInsert(key, out_->vertices);
-    return found != EdgeVertexTable::kMissing ? found : NewVertex(t, in, out, s, mid2, key, true);
+    return found != EdgeVertexTable::kMissing ? found : NewCornerVertex(t, corner, mid2, key);
+  }
+
+  // A crossing on corner `corner` (CornerVertex): the corner's point, exactly as the edge
+  // interpolation would put it, and its own differences (a mix weighting an edge's other end
+  // by 0 would let that end decide the sign of a zero or, infinite, make NaN: edge by edge).
+  // Out of line: rare.
+  __attribute__((noinline)) uint32_t NewCornerVertex(const Node& t, int corner, PackedPoint mid2,
+                                                     uint64_t key) {
+    const bool share = c_.normals == NormalMode::kSmooth;
+    const glm::ivec3 at = Unpack(t.v[corner]);
+    const glm::vec3 pw = c_.world_origin + c_.world_spacing * glm::vec3(at);
+    glm::vec3 grad = share ? GridGradient(at) : glm::vec3(t.g);
+    if (share && glm::dot(grad, grad) == 0) grad = CornerGradient<float>(at);
+    grad *= c_.inv_spacing;
+    const float len2 = glm::dot(grad, grad);
+    glm::vec3 nrm;
+    if (len2 >= std::numeric_limits<float>::min() && len2 <= std::numeric_limits<float>::max()) {
+      nrm = grad * (-1.0f / std::sqrt(len2));
+    } else {
+      glm::dvec3 g = share ? GridGradient<double>(at) : t.g;
+      if (share && glm::dot(g, g) == 0) g = CornerGradient<double>(at);
+      nrm = UnitNormal(g);
+    }
+    return StoreVertex(pw, nrm, mid2, key, share);
+  }
+
+  // Appends a vertex; a shared one on the subtree root's faces is noted for the join.
+  uint32_t StoreVertex(const glm::vec3& pw, const glm::vec3& nrm, PackedPoint mid2, uint64_t key,
+                       bool share) {
+    const uint32_t fresh = out_->vertices;
+    float* p = out_->positions.Extend(3);
+    p[0] = pw.x, p[1] = pw.y, p[2] = pw.z;
+    float* q = out_->normals.Extend(3);
+    q[0] = nrm.x, q[1] = nrm.y, q[2] = nrm.z;
+    ++out_->vertices;
+    if (share && faces_.EdgeOnFace(Unpack(mid2))) out_->boundary.push_back({fresh, key});
+    return fresh;
   }
 
   // Out of line: most lookups hit, and the hit path stays small enough to inline.
-  // `on_corner`: the crossing is the end whose value is the isovalue (CornerVertex).
   __attribute__((noinline)) uint32_t NewVertex(const Node& t, int ia, int ib, int s,
-                                               PackedPoint mid2, uint64_t key,
-                                               bool on_corner = false) {
-    const uint32_t fresh = out_->vertices;
+                                               PackedPoint mid2, uint64_t key) {
     const bool share = c_.normals == NormalMode::kSmooth;
     glm::ivec3 a = Unpack(t.v[ia]), b = Unpack(t.v[ib]);
     float fa = t.f[ia], fb = t.f[ib];
@@ -264,11 +297,8 @@ class LeafEmitter {
     const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
     glm::vec3 grad;
     if (share) {
-      // On a corner, the corner's own differences: a mix weighting the other end by 0 would
-      // still turn its infinite gradient (values near FLT_MAX) into NaN, edge by edge.
-      grad = on_corner ? GridGradient(tt == 0 ? a : b)
-                       : glm::mix(GridGradient(a), GridGradient(b), tt);
-      if (glm::dot(grad, grad) == 0) grad = VanishedGradient<float>(a, b, fa, fb, tt, on_corner);
+      grad = glm::mix(GridGradient(a), GridGradient(b), tt);
+      if (glm::dot(grad, grad) == 0) grad = VanishedGradient<float>(a, b, fa, fb);
     } else {
       grad = glm::vec3(t.g);
     }
@@ -277,14 +307,8 @@ class LeafEmitter {
     const glm::vec3 nrm =
         len2 >= std::numeric_limits<float>::min() && len2 <= std::numeric_limits<float>::max()
             ? grad * (-1.0f / std::sqrt(len2))
-            : NormalInDouble(t, a, b, fa, fb, tt, share, on_corner);
-    float* p = out_->positions.Extend(3);
-    p[0] = pw.x, p[1] = pw.y, p[2] = pw.z;
-    float* q = out_->normals.Extend(3);
-    q[0] = nrm.x, q[1] = nrm.y, q[2] = nrm.z;
-    ++out_->vertices;
-    if (share && faces_.EdgeOnFace(Unpack(mid2))) out_->boundary.push_back({fresh, key});
-    return fresh;
+            : NormalInDouble(t, a, b, fa, fb, tt, share);
+    return StoreVertex(pw, nrm, mid2, key, share);
   }
 
   // The normal when the float gradient's squared length leaves the normal float range (samples
@@ -292,16 +316,20 @@ class LeafEmitter {
   // same gradient in double, (0, 0, 0) only where the data are flat.
   __attribute__((noinline)) glm::vec3 NormalInDouble(const Node& t, const glm::ivec3& a,
                                                      const glm::ivec3& b, float fa, float fb,
-                                                     float tt, bool share,
-                                                     bool on_corner) const {
+                                                     float tt, bool share) const {
     glm::dvec3 g;
     if (share) {
-      g = on_corner ? GridGradient<double>(tt == 0 ? a : b)
-                    : glm::mix(GridGradient<double>(a), GridGradient<double>(b), double(tt));
-      if (glm::dot(g, g) == 0) g = VanishedGradient<double>(a, b, fa, fb, tt, on_corner);
+      g = glm::mix(GridGradient<double>(a), GridGradient<double>(b), double(tt));
+      if (glm::dot(g, g) == 0) g = VanishedGradient<double>(a, b, fa, fb);
     } else {
       g = t.g;  // set for every leaf when normals are flat (a block leaf's only then)
     }
+    return UnitNormal(g);
+  }
+
+  // The unit normal of grid-space gradient g, computed without overflow; (0, 0, 0) where g is
+  // zero or not finite.
+  glm::vec3 UnitNormal(glm::dvec3 g) const {
     g /= c_.xf.spacing;
     const double scale = std::max({std::abs(g.x), std::abs(g.y), std::abs(g.z)});
     if (!(scale > 0) || !std::isfinite(scale)) return glm::vec3(0.0f);
@@ -309,17 +337,15 @@ class LeafEmitter {
     return glm::vec3(g * (-1.0 / std::sqrt(glm::dot(g, g))));
   }
 
-  // A shared vertex's gradient where central differences blend to zero (flat data, such as a
-  // terrace at the isovalue): from the vertex's corner (on_corner: the end where tt puts it)
-  // or from its edge (a to b) alone, so that whichever tetrahedron makes the vertex, in
-  // whatever view, makes the same normal (the making leaf's gradient made normals depend on
-  // the view). Out of line: rare, and inlined it cost the vertex path ~25 instructions.
+  // A shared edge vertex's gradient where central differences blend to zero (flat data, such
+  // as a terrace at the isovalue): from its edge (a to b) alone, so that whichever tetrahedron
+  // makes the vertex, in whatever view, makes the same normal (the making leaf's gradient made
+  // normals depend on the view). Out of line: rare, and inlined it cost the vertex path ~25
+  // instructions.
   template <typename T>
   __attribute__((noinline)) glm::vec<3, T> VanishedGradient(const glm::ivec3& a,
                                                             const glm::ivec3& b, float fa,
-                                                            float fb, float tt,
-                                                            bool on_corner) const {
-    if (on_corner) return CornerGradient<T>(tt == 0 ? a : b);
+                                                            float fb) const {
     return FlatDataGradient(GridGradient<T>(a), GridGradient<T>(b), b - a, fa, fb);
   }
 
