@@ -69,16 +69,18 @@ absl::Status CheckPort(std::string_view address, bool required) {
                                     "' is not HOST:PORT with a port in 0..65535");
 }
 
-std::string ShortestText(double v) {
+namespace {
+
+template <typename T>
+std::string Shortest(T v) {
   char text[32];
-  const auto result = std::to_chars(text, text + sizeof(text), v == 0 ? 0.0 : v);
+  const auto result = std::to_chars(text, text + sizeof(text), v == 0 ? T(0) : v);
   return std::string(text, result.ptr);
 }
 
-std::string ShortestText(float v) {
-  char text[32];
-  const auto result = std::to_chars(text, text + sizeof(text), v == 0 ? 0.0f : v);
-  return std::string(text, result.ptr);
-}
+}  // namespace
+
+std::string ShortestText(double v) { return Shortest(v); }
+std::string ShortestText(float v) { return Shortest(v); }
 
 }  // namespace isostream
