@@ -109,6 +109,25 @@ TEST_F(FileIo, LinksDevicesAndDirectories) {
   EXPECT_EQ(no_folder.code(), absl::StatusCode::kNotFound) << no_folder;
 }
 
+// Where the new file cannot be made or would change more than the contents, the file is
+// written in place: a name too long for the partial file's suffix, and (checkable as root,
+// who can give a file away) another user's file, which a rename would make ours.
+TEST_F(FileIo, WrittenInPlaceWhereReplacingCannotWork) {
+  const std::string long_name = Path(std::string(250, 'n') + ".ply");
+  ASSERT_TRUE(WriteFileBytes(long_name, "first").ok());
+  ASSERT_TRUE(WriteFileBytes(long_name, "second").ok());
+  EXPECT_EQ(*ReadFileBytes(long_name), "second");
+  if (geteuid() != 0) return;  // only root can give a file to another user
+  const std::string theirs = Path("theirs.ply");
+  ASSERT_TRUE(WriteFileBytes(theirs, "old").ok());
+  ASSERT_EQ(chown(theirs.c_str(), 65534, 65534), 0);
+  ASSERT_TRUE(WriteFileBytes(theirs, "new").ok());
+  struct stat st;
+  ASSERT_EQ(stat(theirs.c_str(), &st), 0);
+  EXPECT_EQ(st.st_uid, 65534u);
+  EXPECT_EQ(*ReadFileBytes(theirs), "new");
+}
+
 TEST_F(FileIo, OutputPathsAreCheckedBeforeTheWork) {
   EXPECT_TRUE(CheckOutputPath(Path("new.ply")).ok());
   EXPECT_TRUE(CheckOutputPath("/dev/null").ok());
