@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "server/extract/block_sets.h"
+#include "server/extract/data_box_clip.h"
 #include "server/extract/tree_node.h"
 
 namespace isostream::extract_internal {
@@ -29,16 +30,21 @@ inline uint32_t EtaCode(const Context& c, const Node& t) {
 }
 
 // Triangles of T as a leaf: marching tetrahedra for every isovalue crossing its corners
-// (LeafEmitter's count).
+// (LeafEmitter's count: clipped where T straddles the data box).
 inline int LeafTriangles(const Context& c, const Node& t) {
   const float fmin = std::min(std::min(t.f[0], t.f[1]), std::min(t.f[2], t.f[3]));
   const float fmax = std::max(std::max(t.f[0], t.f[1]), std::max(t.f[2], t.f[3]));
   int first, last;
   IsoRange(c, fmin, fmax, &first, &last);
+  const bool straddles = c.clip && !InsideDataBox(c, t);
   int n = 0;
   for (int s = first; s < last; ++s) {
     const unsigned above = AboveCorners(t.f, c.iso[s]);
-    n += (*c.cases)[above].triangles[CornersAtIso(t.f, c.iso[s]) & above];
+    const MarchingTetsCase& mc = (*c.cases)[above];
+    const unsigned at_iso = CornersAtIso(t.f, c.iso[s]) & above;
+    n += straddles && mc.edge_count != 0
+             ? StraddlingComponentTriangles(c, t, s, mc, above, at_iso)
+             : mc.triangles[at_iso];
   }
   return n;
 }

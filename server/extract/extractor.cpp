@@ -373,8 +373,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   if (r.budget > 0) {
     // Reserving the frame's size up front saves growing the arrays by doubling, which would
     // copy what the join already copied (~1/3 of the join's time at 1 M triangles). The budget
-    // search counted the frame at the chosen eps (clipping at the data box may add or drop a
-    // few triangles); sizing from that count, not the budget, keeps a large budget from
+    // search counted the frame at the chosen eps (clipping at the data box included); sizing
+    // from that count, not the budget, keeps a large budget from
     // reserving hundreds of MB of address space for a small frame. An eps from the memo comes
     // with no count: the budget bounds the frame then. Isosurface meshes have about half as
     // many vertices as triangles.
@@ -482,6 +482,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
             } else {
               Traverser<true>(c, &table, part.get()).Run(items[i]);
             }
+            if (part->maybe_unused) part->DropUnusedVertices();
             std::lock_guard<std::mutex> lock(mu);
             parts[i] = std::move(part);
             done[i] = 1;

@@ -14,6 +14,7 @@
 
 #include "server/extract/block_sets.h"
 #include "server/extract/cut_recorder.h"
+#include "server/extract/data_box_clip.h"
 #include "server/extract/edge_vertex_table.h"
 #include "server/extract/subtree_mesh.h"
 #include "server/extract/tree_node.h"
@@ -132,8 +133,9 @@ class LeafEmitter {
     const MarchingTetsCase& mc = (*c_.cases)[above];
     if (mc.edge_count == 0) return 0;
     const unsigned at_iso = CornersAtIso(t.f, iso) & above;
+    if (c_.clip && !InsideDataBox(c_, t)) return StraddlingComponent(t, s, mc, above, at_iso);
     if (!kEmit) return mc.triangles[at_iso];
-    if (at_iso != 0) return ComponentThroughCorners(t, s, mc, above, at_iso);
+    if (at_iso != 0) return ComponentThroughCorners(t, s, mc, above, at_iso, false);
     const int count = mc.edge_count - 2;
     uint32_t v[4];
     const int edges = mc.edge_count;  // a local: the stores below could alias the table
@@ -146,11 +148,6 @@ class LeafEmitter {
     // Wound so the geometric normal points to decreasing f (out of the region f >= iso).
     const bool flip = mc.flip[c_.negative[t.cls.value]];
     const uint8_t surface = c_.iso_surface[s];
-    if (c_.clip && !InsideDataBox(c_, t)) {
-      ClipTriangle(v[0], flip ? v[2] : v[1], flip ? v[1] : v[2], surface);
-      if (count == 2) ClipTriangle(v[0], flip ? v[3] : v[2], flip ? v[2] : v[3], surface);
-      return count;
-    }
     uint32_t* out = out_->triangles.Extend(3 * count);
     uint8_t* surf = out_->surface.Extend(count);
     out[0] = v[0], out[1] = flip ? v[2] : v[1], out[2] = flip ? v[1] : v[2];
@@ -162,55 +159,71 @@ class LeafEmitter {
     return count;
   }
 
+  // A component of a leaf that straddles the data box, clipped there. One whose triangles all
+  // fall outside makes no vertices (they would be used by nothing). Out of line: rare.
+  __attribute__((noinline)) int StraddlingComponent(const Node& t, int s, const MarchingTetsCase& mc,
+                                                    unsigned above, unsigned at_iso) {
+    const int n = StraddlingComponentTriangles(c_, t, s, mc, above, at_iso);
+    if (!kEmit || n == 0) return n;
+    return ComponentThroughCorners(t, s, mc, above, at_iso, true);
+  }
+
   // A component with crossings on corners whose value is the isovalue (flat or integer data):
   // the crossings of one such corner are one vertex, named by the corner, and a triangle left
-  // without an area is not emitted (most of a terrace's triangles had none). Out of line: rare.
+  // without an area is not emitted (most of a terrace's triangles had none). Also the path of
+  // straddling leaves (`clip`), with or without such corners. Out of line: rare.
   __attribute__((noinline)) int ComponentThroughCorners(const Node& t, int s,
                                                         const MarchingTetsCase& mc,
-                                                        unsigned above, unsigned at_iso) {
+                                                        unsigned above, unsigned at_iso,
+                                                        bool clip) {
     const int edges = mc.edge_count;
-    uint32_t v[4];
     int where[4];  // the corner a crossing sits on, or 4 + its edge
+    int cycle[4] = {0, 1, 2, 3};  // the crossings in the fan's order
+    glm::dvec3 p[4];              // their positions as stored
     for (int i = 0; i < edges; ++i) {
       where[i] = CrossingPlace(mc, above, at_iso, i);
-      v[i] = where[i] < 4 ? CornerVertex(t, where[i], s)
-                          : EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
+      const int ia = mc.edge[i][0], ib = mc.edge[i][1];
+      p[i] = glm::dvec3(where[i] < 4 ? CornerWorld(c_, t.v[where[i]])
+                                     : EdgeCrossingWorld(c_, t.v[ia], t.v[ib], t.f[ia], t.f[ib],
+                                                         c_.iso[s]));
     }
-    if (edges == 4 && QuadSplitsAlong13(v)) {
-      std::rotate(v, v + 1, v + 4);
-      std::rotate(where, where + 1, where + 4);
-    }
+    if (edges == 4 && extract_internal::QuadSplitsAlong13(p)) std::rotate(cycle, cycle + 1, cycle + 4);
+    auto has_area = [&](int k) {  // fan triangle (0, k, k + 1)
+      const int a = where[cycle[0]], b = where[cycle[k]], d = where[cycle[k + 1]];
+      return a != b && b != d && a != d;
+    };
+    // Only crossings of triangles with an area get vertices: the others would be used by none.
+    unsigned used = 0;
+    for (int k = 1; k + 1 < edges; ++k)
+      if (has_area(k)) used |= 1u << cycle[0] | 1u << cycle[k] | 1u << cycle[k + 1];
+    uint32_t made[4];
+    for (int i = 0; i < edges; ++i)
+      if ((used >> i) & 1)
+        made[i] = where[i] < 4 ? CornerVertex(t, where[i], s)
+                               : EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
+    uint32_t v[4];
+    for (int i = 0; i < edges; ++i) v[i] = (used >> cycle[i]) & 1 ? made[cycle[i]] : 0;
     const bool flip = mc.flip[c_.negative[t.cls.value]];
     const uint8_t surface = c_.iso_surface[s];
-    const bool clip = c_.clip && !InsideDataBox(c_, t);
     int emitted = 0;
-    for (int k = 1; k + 1 < edges; ++k) {  // the fan (0, k, k + 1)
-      if (where[0] == where[k] || where[k] == where[k + 1] || where[0] == where[k + 1]) continue;
+    for (int k = 1; k + 1 < edges; ++k) {
+      if (!has_area(k)) continue;
       const uint32_t a = v[0], b = flip ? v[k + 1] : v[k], d = flip ? v[k] : v[k + 1];
       if (clip) {
-        ClipTriangle(a, b, d, surface);
+        emitted += ClipTriangle(a, b, d, surface);
       } else {
         uint32_t* out = out_->triangles.Extend(3);
         out[0] = a, out[1] = b, out[2] = d;
         out_->surface.Push(surface);
+        ++emitted;
       }
-      ++emitted;
     }
     return emitted;
   }
 
-  // A quad is split along its shorter diagonal (better triangles); equal lengths are broken by
-  // position, so the choice does not depend on the tetrahedron's vertex order.
   bool QuadSplitsAlong13(const uint32_t v[4]) const {
-    const glm::dvec3 p0 = Position(v[0]), p1 = Position(v[1]), p2 = Position(v[2]),
-                     p3 = Position(v[3]);
-    const double d02 = glm::dot(p2 - p0, p2 - p0), d13 = glm::dot(p3 - p1, p3 - p1);
-    if (d02 != d13) return d13 < d02;
-    auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
-      return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
-    };
-    const glm::dvec3 m02 = less(p0, p2) ? p0 : p2, m13 = less(p1, p3) ? p1 : p3;
-    return less(m13, m02);
+    const glm::dvec3 p[4] = {Position(v[0]), Position(v[1]), Position(v[2]), Position(v[3])};
+    return extract_internal::QuadSplitsAlong13(p);
   }
 
   glm::dvec3 Position(uint32_t i) const {
@@ -248,7 +261,7 @@ class LeafEmitter {
                                                      uint64_t key) {
     const bool share = c_.normals == NormalMode::kSmooth;
     const glm::ivec3 at = Unpack(t.v[corner]);
-    const glm::vec3 pw = c_.world_origin + c_.world_spacing * glm::vec3(at);
+    const glm::vec3 pw = CornerWorld(c_, t.v[corner]);
     glm::vec3 grad = share ? GridGradient(at) : glm::vec3(t.g);
     if (share && glm::dot(grad, grad) == 0) grad = CornerGradient<float>(at);
     grad *= c_.inv_spacing;
@@ -281,20 +294,11 @@ class LeafEmitter {
   __attribute__((noinline)) uint32_t NewVertex(const Node& t, int ia, int ib, int s,
                                                PackedPoint mid2, uint64_t key) {
     const bool share = c_.normals == NormalMode::kSmooth;
-    glm::ivec3 a = Unpack(t.v[ia]), b = Unpack(t.v[ib]);
+    glm::ivec3 a = Unpack(t.v[ia]), b = Unpack(t.v[ib]), d;
     float fa = t.f[ia], fb = t.f[ib];
-    glm::ivec3 d = b - a;
-    if ((d.x != 0 ? d.x : d.y != 0 ? d.y : d.z) < 0) {
-      std::swap(a, b);
-      std::swap(fa, fb);
-      d = -d;
-    }
-    // The parameter in double (float differences of values near FLT_MAX overflow), the point
-    // in single precision: a grid coordinate below 2^13 keeps ~1e-3 voxel in its last bit, far
-    // below the codec's quantization step.
-    const float tt = float((double(c_.iso[s]) - fa) / (double(fb) - fa));
-    const glm::vec3 pg = glm::vec3(a) + tt * glm::vec3(d);
-    const glm::vec3 pw = c_.world_origin + c_.world_spacing * pg;
+    OrientEdge(a, b, fa, fb, d);
+    const float tt = CrossingParameter(c_.iso[s], fa, fb);
+    const glm::vec3 pw = CrossingWorld(c_, a, d, tt);
     glm::vec3 grad;
     if (share) {
       grad = glm::mix(GridGradient(a), GridGradient(b), tt);
@@ -424,54 +428,36 @@ class LeafEmitter {
     return T(c_.F(value_offset));
   }
 
-  // A leaf that straddles the data box: keep the part of the triangle inside it.
-  // Out of line: rare, and its polygon buffers would otherwise enlarge every leaf's frame.
-  __attribute__((noinline)) void ClipTriangle(uint32_t a, uint32_t b, uint32_t d, uint8_t surface) {
-    struct V {
-      glm::dvec3 p, n;
-    };
-    auto load = [&](uint32_t i) {
-      const float* q = &out_->normals[3 * size_t(i)];
-      return V{Position(i), glm::dvec3(q[0], q[1], q[2])};
-    };
-    V poly[9], next[9];
-    uint32_t ids[9], next_ids[9];
-    int count = 3;
-    poly[0] = load(a), poly[1] = load(b), poly[2] = load(d);
-    ids[0] = a, ids[1] = b, ids[2] = d;
-    for (int axis = 0; axis < 3; ++axis) {
-      const double limit = c_.xf.origin[axis] + c_.xf.spacing[axis] * c_.data_max[axis];
-      int m = 0;
-      for (int i = 0; i < count; ++i) {
-        const V& p = poly[i];
-        const V& q = poly[(i + 1) % count];
-        const bool pin = p.p[axis] <= limit, qin = q.p[axis] <= limit;
-        if (pin) next[m] = p, next_ids[m++] = ids[i];
-        if (pin != qin) {
-          const double s = (limit - p.p[axis]) / (q.p[axis] - p.p[axis]);
-          next[m] = V{glm::mix(p.p, q.p, s), glm::normalize(glm::mix(p.n, q.n, s))};
-          next[m].p[axis] = limit;
-          next_ids[m++] = EdgeVertexTable::kMissing;
-        }
-      }
-      count = m;
-      std::copy(next, next + m, poly);
-      std::copy(next_ids, next_ids + m, ids);
-      if (count < 3) return;
+  // A leaf that straddles the data box: keeps the part of the triangle inside it (ClipToDataBox)
+  // and returns how many triangles that is. Out of line: rare, and its polygon buffers would
+  // otherwise enlarge every leaf's frame.
+  __attribute__((noinline)) int ClipTriangle(uint32_t a, uint32_t b, uint32_t d, uint8_t surface) {
+    ClipVertex poly[9];
+    const uint32_t ids[3] = {a, b, d};
+    for (int i = 0; i < 3; ++i) {
+      const float* q = &out_->normals[3 * size_t(ids[i])];
+      const float* p = &out_->positions[3 * size_t(ids[i])];
+      poly[i] = {glm::vec3(p[0], p[1], p[2]), glm::dvec3(q[0], q[1], q[2]), ids[i]};
     }
+    const int count = ClipToDataBox(c_, poly, 3);
+    out_->maybe_unused = true;
     for (int i = 0; i < count; ++i) {
-      if (ids[i] != EdgeVertexTable::kMissing) continue;
-      ids[i] = out_->vertices++;
+      if (poly[i].id != EdgeVertexTable::kMissing) continue;
+      poly[i].id = out_->vertices++;
       float* p = out_->positions.Extend(3);
-      p[0] = float(poly[i].p.x), p[1] = float(poly[i].p.y), p[2] = float(poly[i].p.z);
+      p[0] = poly[i].p.x, p[1] = poly[i].p.y, p[2] = poly[i].p.z;
       float* q = out_->normals.Extend(3);
       q[0] = float(poly[i].n.x), q[1] = float(poly[i].n.y), q[2] = float(poly[i].n.z);
     }
+    int emitted = 0;
     for (int i = 1; i + 1 < count; ++i) {
+      if (!FanTriangleEmitted(poly, i)) continue;
       uint32_t* out = out_->triangles.Extend(3);
-      out[0] = ids[0], out[1] = ids[i], out[2] = ids[i + 1];
+      out[0] = poly[0].id, out[1] = poly[i].id, out[2] = poly[i + 1].id;
       out_->surface.Push(surface);
+      ++emitted;
     }
+    return emitted;
   }
 
   const Context& c_;

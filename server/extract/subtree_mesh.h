@@ -27,6 +27,9 @@ struct SubtreeMesh {
   uint32_t vertices = 0;
   int64_t visited = 0;
   int64_t leaves = 0;
+  // Some vertex may be used by no triangle (DropUnusedVertices): a triangle was clipped at the
+  // data box, and its corners outside went.
+  bool maybe_unused = false;
 
   size_t vertex_count() const { return vertices; }
   size_t capacity_bytes() const {
@@ -42,6 +45,33 @@ struct SubtreeMesh {
     boundary.clear();
     vertices = 0;
     visited = leaves = 0;
+    maybe_unused = false;
+  }
+
+  // Removes the vertices no triangle uses, keeping the others in order (the output stays
+  // deterministic); boundary entries of removed vertices go too.
+  void DropUnusedVertices() {
+    constexpr uint32_t kUnused = 0xffffffffu;
+    std::vector<uint32_t> remap(vertices, kUnused);
+    for (size_t i = 0; i < triangles.size(); ++i) remap[triangles[i]] = 0;
+    uint32_t kept = 0;
+    for (uint32_t v = 0; v < vertices; ++v) {
+      if (remap[v] == kUnused) continue;
+      for (size_t a = 0; a < 3; ++a) {
+        positions[3 * size_t(kept) + a] = positions[3 * size_t(v) + a];
+        normals[3 * size_t(kept) + a] = normals[3 * size_t(v) + a];
+      }
+      remap[v] = kept++;
+    }
+    if (kept == vertices) return;
+    for (size_t i = 0; i < triangles.size(); ++i) triangles[i] = remap[triangles[i]];
+    size_t b = 0;
+    for (const auto& [local, key] : boundary)
+      if (remap[local] != kUnused) boundary[b++] = {remap[local], key};
+    boundary.resize(b);
+    positions.Shrink(3 * size_t(kept));
+    normals.Shrink(3 * size_t(kept));
+    vertices = kept;
   }
 };
 

@@ -210,7 +210,9 @@ inline void ComponentOrder(const Context& c, Gradient gradient, float f0, Packed
 }
 
 // The children of t in draw order: the farther one (drawn first) in *first.
-inline void Bisect(const Context& c, const Node& t, Node* first, Node* second) {
+// Always inlined: the traversal loop is its only hot caller, and a call here cost ~1%.
+__attribute__((always_inline)) inline void Bisect(const Context& c, const Node& t, Node* first,
+                                                  Node* second) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
   const PackedPoint x = (t.v[0] + t.v[3]) >> 1;
   const float fx = c.F(t.xref_value);

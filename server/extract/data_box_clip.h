@@ -1,0 +1,157 @@
+// Where the surface meets the data box of a volume smaller than the hierarchy's cube: the
+// crossing points as the emitter stores them, the quad diagonal, and the clipping of a
+// straddling leaf's triangles at the box. The emitting and the counting passes share these, so
+// a count (budget search, count curves) is the number of triangles the emitter appends.
+// Private to server/extract.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+#include <utility>
+
+#include "server/extract/edge_vertex_table.h"
+#include "server/extract/marching_tets.h"
+#include "server/extract/tree_node.h"
+
+namespace isostream::extract_internal {
+
+// The parts of a crossing of iso on an edge, shared by LeafEmitter::NewVertex and the counts.
+// The edge is taken from its lexicographically smaller end, so every tetrahedron around it
+// makes the same bits: OrientEdge swaps the ends (a, b, their values) if needed and gives
+// d = b - a.
+inline void OrientEdge(glm::ivec3& a, glm::ivec3& b, float& fa, float& fb, glm::ivec3& d) {
+  d = b - a;
+  if ((d.x != 0 ? d.x : d.y != 0 ? d.y : d.z) < 0) {
+    std::swap(a, b);
+    std::swap(fa, fb);
+    d = -d;
+  }
+}
+// The parameter in double (float differences of values near FLT_MAX overflow), the point in
+// single precision: a grid coordinate below 2^13 keeps ~1e-3 voxel in its last bit, far below
+// the codec's quantization step.
+inline float CrossingParameter(float iso, float fa, float fb) {
+  return float((double(iso) - fa) / (double(fb) - fa));
+}
+inline glm::vec3 CrossingWorld(const Context& c, const glm::ivec3& a, const glm::ivec3& d,
+                               float t) {
+  return c.world_origin + c.world_spacing * (glm::vec3(a) + t * glm::vec3(d));
+}
+
+// The stored position of the crossing on edge (va, vb).
+inline glm::vec3 EdgeCrossingWorld(const Context& c, PackedPoint va, PackedPoint vb, float fa,
+                                   float fb, float iso) {
+  glm::ivec3 a = Unpack(va), b = Unpack(vb), d;
+  OrientEdge(a, b, fa, fb, d);
+  return CrossingWorld(c, a, d, CrossingParameter(iso, fa, fb));
+}
+
+// The stored position of a crossing on a grid point (its value is the isovalue).
+inline glm::vec3 CornerWorld(const Context& c, PackedPoint v) {
+  return c.world_origin + c.world_spacing * glm::vec3(Unpack(v));
+}
+
+// A quad is split along its shorter diagonal (better triangles); equal lengths are broken by
+// position, so the choice does not depend on the tetrahedron's vertex order.
+inline bool QuadSplitsAlong13(const glm::dvec3 p[4]) {
+  const double d02 = glm::dot(p[2] - p[0], p[2] - p[0]), d13 = glm::dot(p[3] - p[1], p[3] - p[1]);
+  if (d02 != d13) return d13 < d02;
+  auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
+    return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+  };
+  const glm::dvec3 m02 = less(p[0], p[2]) ? p[0] : p[2], m13 = less(p[1], p[3]) ? p[1] : p[3];
+  return less(m13, m02);
+}
+
+struct ClipVertex {
+  glm::vec3 p;  // as stored, so the tests below see what the output holds
+  glm::dvec3 n;
+  uint32_t id;  // EdgeVertexTable::kMissing: made by the clip
+};
+
+// Clips the polygon poly[0..count) (room for 9) to the data box, in place; returns how many
+// vertices are left (below 3: nothing). Positions and the box's faces are in single precision,
+// as stored, so a vertex on a face is on it exactly: such a vertex is the crossing there, and no
+// copy of it is made (a copy made a triangle without area).
+inline int ClipToDataBox(const Context& c, ClipVertex* poly, int count) {
+  ClipVertex next[9];
+  for (int axis = 0; axis < 3; ++axis) {
+    const float limit = c.world_origin[axis] + c.world_spacing[axis] * float(c.data_max[axis]);
+    int m = 0;
+    for (int i = 0; i < count; ++i) {
+      const ClipVertex& p = poly[i];
+      const ClipVertex& q = poly[(i + 1) % count];
+      const bool pin = p.p[axis] <= limit, qin = q.p[axis] <= limit;
+      if (pin) next[m++] = p;
+      if (pin != qin && p.p[axis] != limit && q.p[axis] != limit) {
+        const double s = (double(limit) - p.p[axis]) / (double(q.p[axis]) - p.p[axis]);
+        ClipVertex& x = next[m++];
+        x.p = glm::vec3(glm::mix(glm::dvec3(p.p), glm::dvec3(q.p), s));
+        x.p[axis] = limit;
+        // Opposite or zero (flat data) end normals blend to nothing: the inside end's then.
+        const glm::dvec3 n = glm::mix(p.n, q.n, s);
+        const double length = std::sqrt(glm::dot(n, n));
+        x.n = length > 0 && std::isfinite(length) ? n / length : pin ? p.n : q.n;
+        x.id = EdgeVertexTable::kMissing;
+      }
+    }
+    count = m;
+    for (int i = 0; i < m; ++i) poly[i] = next[i];
+    if (count < 3) return 0;
+  }
+  return count;
+}
+
+// Whether the clipped polygon's fan triangle (0, i, i + 1) is emitted: a crossing can round onto
+// another corner of the polygon (near a box edge), and a triangle with two corners in one
+// place has no area.
+inline bool FanTriangleEmitted(const ClipVertex* poly, int i) {
+  return poly[0].p != poly[i].p && poly[i].p != poly[i + 1].p && poly[0].p != poly[i + 1].p;
+}
+
+// Triangles left of triangle (a, b, d) inside the data box.
+inline int ClippedTriangleCount(const Context& c, const glm::vec3& a, const glm::vec3& b,
+                                const glm::vec3& d) {
+  ClipVertex poly[9];
+  poly[0] = {a, glm::dvec3(0.0), 0};
+  poly[1] = {b, glm::dvec3(0.0), 0};
+  poly[2] = {d, glm::dvec3(0.0), 0};
+  const int n = ClipToDataBox(c, poly, 3);
+  int triangles = 0;
+  for (int i = 1; i + 1 < n; ++i) triangles += FanTriangleEmitted(poly, i);
+  return triangles;
+}
+
+// The triangles LeafEmitter::Component appends for sorted isovalue s on leaf t, a leaf that
+// straddles the data box: the same crossings, diagonal and triangles without area dropped,
+// each triangle clipped. `above` and `at_iso` as there (mc = cases[above], with crossings).
+inline int StraddlingComponentTriangles(const Context& c, const Node& t, int s,
+                                        const MarchingTetsCase& mc, unsigned above,
+                                        unsigned at_iso) {
+  const int edges = mc.edge_count;
+  glm::dvec3 p[4];
+  int where[4];
+  for (int i = 0; i < edges; ++i) {
+    where[i] = CrossingPlace(mc, above, at_iso, i);
+    const int ia = mc.edge[i][0], ib = mc.edge[i][1];
+    p[i] = glm::dvec3(where[i] < 4 ? CornerWorld(c, t.v[where[i]])
+                                   : EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib],
+                                                       c.iso[s]));
+  }
+  if (edges == 4 && QuadSplitsAlong13(p)) {
+    std::rotate(p, p + 1, p + 4);
+    std::rotate(where, where + 1, where + 4);
+  }
+  int n = 0;
+  for (int k = 1; k + 1 < edges; ++k) {  // the fan (0, k, k + 1)
+    if (where[0] == where[k] || where[k] == where[k + 1] || where[0] == where[k + 1]) continue;
+    n += ClippedTriangleCount(c, glm::vec3(p[0]), glm::vec3(p[k]), glm::vec3(p[k + 1]));
+  }
+  return n;
+}
+
+}  // namespace isostream::extract_internal

@@ -1,0 +1,145 @@
+// Volumes smaller than the hierarchy's cube, prepared as the CLI and the daemon prepare them:
+// leaves that straddle the data box are clipped there. The count passes count what the emitter
+// appends (so a budget bounds the frame, and every eps `info` prints gives its count back), no
+// vertex is left unused, no triangle has two corners in one place, and normals stay finite.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "mesh_test_meshes.h"
+#include "server/extract/extractor.h"
+#include "server/hierarchy/prepared_volume.h"
+#include "shared/mesh_validate.h"
+
+namespace isostream {
+namespace {
+
+struct RawVolume {
+  std::string name;
+  int dims[3];
+  std::vector<float> values;  // x fastest
+};
+
+// Integer values 0..4 (crossings land on grid points and on the box's faces exactly).
+RawVolume RandomIntegers(int nx, int ny, int nz, unsigned seed) {
+  RawVolume v{"integers " + std::to_string(nx) + "x" + std::to_string(ny) + "x" +
+                  std::to_string(nz),
+              {nx, ny, nz},
+              {}};
+  std::mt19937 rng(seed);
+  for (int i = 0; i < nx * ny * nz; ++i) v.values.push_back(float(rng() % 5));
+  return v;
+}
+
+RawVolume Smooth(int nx, int ny, int nz) {
+  RawVolume v{"smooth", {nx, ny, nz}, {}};
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x)
+        v.values.push_back(float(std::sin(0.21 * x) + std::cos(0.17 * y) * std::sin(0.23 * z)));
+  return v;
+}
+
+// Zero but for a few integer values at the +x face of the box: at iso 3 and eps 0.5 a clipped
+// crossing falls between two vertices whose normals are opposite (their blend was NaN).
+RawVolume OppositeNormalsAtTheBox() {
+  RawVolume v{"opposite normals", {7, 7, 12}, std::vector<float>(7 * 7 * 12, 0.0f)};
+  const int set[][4] = {{6, 4, 9, 3},  {6, 3, 10, 1}, {5, 4, 10, 4}, {6, 4, 10, 3}, {6, 5, 10, 2},
+                        {6, 3, 11, 4}, {5, 4, 11, 1}, {6, 4, 11, 3}, {6, 5, 11, 2}};
+  for (const auto& s : set) v.values[size_t(s[0] + 7 * (s[1] + 7 * s[2]))] = float(s[3]);
+  return v;
+}
+
+PreparedVolume Prepare(const RawVolume& raw, const testing::ScratchDir& dir) {
+  const std::string path = dir.File("v.f32");
+  FILE* f = std::fopen(path.c_str(), "wb");
+  EXPECT_NE(f, nullptr);
+  if (f) {
+    std::fwrite(raw.values.data(), sizeof(float), raw.values.size(), f);
+    std::fclose(f);
+  }
+  const std::string spec = "raw:" + path + ":" + std::to_string(raw.dims[0]) + "x" +
+                           std::to_string(raw.dims[1]) + "x" + std::to_string(raw.dims[2]) +
+                           ":float32";
+  auto prepared = PrepareVolume(spec, VolumeLimits{}, HierarchyCacheOptions{},
+                                HierarchyBuildOptions{});
+  EXPECT_TRUE(prepared.ok()) << prepared.status();
+  return prepared.ok() ? std::move(*prepared) : PreparedVolume{};
+}
+
+ExtractRequest Request(const std::vector<float>& iso, double eps, int64_t budget) {
+  ExtractRequest r;
+  r.isovalues = iso;
+  r.eps = eps;
+  r.budget = budget;
+  r.view.eye = {-9.0, 31.0, 17.0};
+  return r;
+}
+
+void ExpectCleanMesh(const OrderedMesh& m, const RawVolume& raw, const std::string& what) {
+  EXPECT_TRUE(ValidateMesh(m).ok()) << what << ": " << ValidateMesh(m);
+  std::vector<char> used(m.vertex_count(), 0);
+  for (uint32_t i : m.triangles) used[i] = 1;
+  size_t unused = 0, coincident = 0, outside = 0, bad_normals = 0;
+  for (char u : used) unused += !u;
+  for (size_t t = 0; t < m.triangle_count(); ++t) {
+    const float* p[3];
+    for (int i = 0; i < 3; ++i) p[i] = &m.positions[3 * size_t(m.triangles[3 * t + i])];
+    auto same = [](const float* a, const float* b) {
+      return a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
+    };
+    coincident += same(p[0], p[1]) || same(p[1], p[2]) || same(p[0], p[2]);
+  }
+  for (size_t v = 0; v < m.vertex_count(); ++v) {
+    for (int a = 0; a < 3; ++a)  // unit spacing, origin 0: the box is [0, dims - 1]
+      outside += !(m.positions[3 * v + a] >= 0 && m.positions[3 * v + a] <= raw.dims[a] - 1);
+    const float* n = &m.normals[3 * v];
+    const double length = std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
+    bad_normals += !(std::abs(length - 1) < 1e-4 || length == 0);
+  }
+  EXPECT_EQ(unused, 0u) << what;
+  EXPECT_EQ(coincident, 0u) << what;
+  EXPECT_EQ(outside, 0u) << what;
+  EXPECT_EQ(bad_normals, 0u) << what;
+}
+
+TEST(ExtractDataBox, CountsWhatItEmitsAndBudgetsBoundTheFrame) {
+  testing::ScratchDir dir;
+  const std::vector<RawVolume> volumes = {RandomIntegers(19, 12, 2, 5), RandomIntegers(9, 14, 6, 8),
+                                          Smooth(23, 9, 14), OppositeNormalsAtTheBox()};
+  for (const RawVolume& raw : volumes) {
+    const PreparedVolume v = Prepare(raw, dir);
+    ASSERT_NE(v.hierarchy, nullptr) << raw.name;
+    for (const std::vector<float>& iso : {std::vector<float>{0.5f, 3.0f}, {-0.3f, 0.6f}, {3.0f}}) {
+      int64_t largest = 0;
+      for (double eps : {0.0, 0.1, 0.5, 1.0, 3.0}) {
+        const std::string what = raw.name + " iso " + std::to_string(iso[0]) + ".. eps " +
+                                 std::to_string(eps);
+        const auto res = Extract(*v.hierarchy, v.grid_to_world, Request(iso, eps, 0));
+        ASSERT_TRUE(res.ok()) << what << ": " << res.status();
+        const auto counted =
+            CountTriangles(*v.hierarchy, v.grid_to_world, Request(iso, eps, 0), eps);
+        ASSERT_TRUE(counted.ok()) << what;
+        EXPECT_EQ(*counted, int64_t(res->mesh.triangle_count())) << what;
+        ExpectCleanMesh(res->mesh, raw, what);
+        largest = std::max(largest, *counted);
+      }
+      for (int64_t budget : {largest / 7, largest / 3, largest / 2}) {
+        if (budget <= 0) continue;
+        const std::string what = raw.name + " iso " + std::to_string(iso[0]) + ".. budget " +
+                                 std::to_string(budget);
+        const auto res = Extract(*v.hierarchy, v.grid_to_world, Request(iso, 0, budget));
+        ASSERT_TRUE(res.ok()) << what << ": " << res.status();
+        EXPECT_LE(int64_t(res->mesh.triangle_count()), budget) << what;
+        ExpectCleanMesh(res->mesh, raw, what);
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace isostream
