@@ -200,8 +200,11 @@ int Run(const Args& args) {
   if (!out.empty() && !absl::EndsWithIgnoreCase(out, ".png"))
     return Fail(
         absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" + out + "'"));
-  if (!out.empty())
-    if (const absl::Status writable = CheckOutputPath(out); !writable.ok())
+  // The files it will write: with --orbit, name_000.png, ... (not the name itself).
+  for (int i = 0; !out.empty() && i < std::max(1, args.orbit); ++i)
+    if (const absl::Status writable =
+            CheckOutputPath(args.orbit > 0 ? NumberedPath(out, i) : out);
+        !writable.ok())
       return Fail(absl::InvalidArgumentError(writable.message()));  // an argument: exit 2
   int width = 0, height = 0;
   const absl::Status size_ok = ParseImageSize(args.size, "--size", 16384, &width, &height);

@@ -2,7 +2,7 @@
 //
 // Settings come from defaults, then --config FILE.json, then flags. It listens on 127.0.0.1
 // unless told otherwise, prints "listening on HOST:PORT" on stdout once it accepts calls (port
-// 0 picks a free port), and on SIGINT/SIGTERM turns its health status to NOT_SERVING, refuses
+// 0 picks a free port), and on SIGINT/SIGTERM/SIGHUP turns its health status to NOT_SERVING, refuses
 // new streams, lets frames in flight finish (bounded wait) and exits 0.
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -25,6 +25,17 @@
 namespace {
 
 using isostream::service::DaemonConfig;
+
+// The signals that stop the daemon gracefully. SIGHUP too: a closing terminal sends it, and its
+// default action ended the process at once, cutting frames in flight.
+sigset_t StopSignals() {
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGHUP);
+  return signals;
+}
 
 bool ReadFile(const std::string& path, std::string* out) {
   std::ifstream in(path, std::ios::binary);
@@ -95,8 +106,11 @@ int Run(const DaemonConfig& config) {
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || port == 0) {
     spdlog::critical("cannot listen on {}: the port is in use, or the address is not this "
-                     "machine's",
-                     config.listen);
+                     "machine's{}",
+                     config.listen,
+                     config.tls_cert.empty()
+                         ? ""
+                         : ", or the TLS certificate and key do not belong together");
     return 1;
   }
   // Health checks that name the service (as Kubernetes' gRPC probes may) see it too, not only
@@ -110,15 +124,12 @@ int Run(const DaemonConfig& config) {
                config.tls_cert.empty() ? "plaintext" : "TLS", config.volumes.size(),
                config.token.empty() ? "" : ", bearer token required");
 
-  // SIGINT/SIGTERM were blocked before any thread started; wait for one here.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGTERM);
+  // The stop signals were blocked before any thread started; wait for one here.
+  sigset_t signals = StopSignals();
   int sig = 0;
   sigwait(&signals, &sig);
   spdlog::info("{}: stopping (health NOT_SERVING, finishing frames in flight)",
-               sig == SIGINT ? "SIGINT" : "SIGTERM");
+               sig == SIGINT ? "SIGINT" : sig == SIGHUP ? "SIGHUP" : "SIGTERM");
 
   if (auto* health = server->GetHealthCheckService()) health->SetServingStatus(false);
   service.BeginShutdown();
@@ -137,10 +148,7 @@ int main(int argc, char** argv) {
   isostream::KeepFreedMemoryForReuse();  // frames reuse freed memory instead of new pages
   // Block the stop signals in every thread (all threads are created after this), so that one
   // sigwait sees them and no gRPC or TBB thread is interrupted.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGTERM);
+  const sigset_t signals = StopSignals();
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   signal(SIGPIPE, SIG_IGN);
   google::protobuf::SetLogHandler(&ProtobufLog);
@@ -238,7 +246,14 @@ int main(int argc, char** argv) {
   if (*o_cache_max) config.cache_max_mb = cache_max_mb;
   if (*o_cert) config.tls_cert = tls_cert;
   if (*o_key) config.tls_key = tls_key;
-  if (*o_token) config.token = token;
+  if (*o_token) {
+    // An empty --token (an unset variable, say) would serve without one, silently.
+    if (token.empty()) {
+      std::fprintf(stderr, "isostreamd: --token is empty; leave it out to serve without a token\n");
+      return 2;
+    }
+    config.token = token;
+  }
   if (*o_dim) config.limits.max_dim = max_dim;
   if (*o_chunk) config.chunk_triangles = chunk_triangles;
   if (*o_retain) config.retain_mb = retain_mb;

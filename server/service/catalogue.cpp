@@ -105,6 +105,8 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
   }
   std::lock_guard<std::mutex> build_lock(entry->build_mu);
   if (entry->served) return entry->served;
+  const auto now = std::chrono::steady_clock::now();
+  if (!entry->failed.ok() && now - entry->failed_at < kRetryFailedAfter) return entry->failed;
   const std::string spec = options_.volumes.empty() ? name : options_.volumes.at(name);
   HierarchyBuildOptions build;
   build.threads = options_.build_threads;
@@ -113,10 +115,13 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
     spdlog::error("preparing volume '{}' ({}) failed: {}", name, spec,
                   std::string(prepared.status().message()));
     // The message names the spec, which the operator wrote: it stays in the log for catalogue
-    // entries and is not shown to clients.
+    // entries and is not shown to clients. Nor is its code: the client's request was right
+    // (INVALID_ARGUMENT made the viewer call it an argument error).
     if (options_.volumes.empty()) return prepared.status();
-    return absl::Status(prepared.status().code(),
-                        "volume " + Quoted(name) + " could not be prepared (see the daemon's log)");
+    entry->failed = absl::FailedPreconditionError(
+        "volume " + Quoted(name) + " could not be prepared on the daemon (see its log)");
+    entry->failed_at = now;
+    return entry->failed;
   }
   auto served = std::make_shared<ServedVolume>();
   served->name = name;

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -80,7 +81,12 @@ class VolumeCatalogue {
     std::mutex build_mu;  // held while preparing, so one build per volume
     ServedVolumePtr served;
     uint64_t last_use = 0;  // under the catalogue's mu_
+    // A catalogue entry that failed to prepare: the answer until kRetryFailedAfter has passed,
+    // so that clients asking again do not re-read a bad file and fill the log each time.
+    absl::Status failed;
+    std::chrono::steady_clock::time_point failed_at;
   };
+  static constexpr std::chrono::seconds kRetryFailedAfter{30};
   void DropLeastRecentlyUsedLocked(const std::string& keep);
   CatalogueOptions options_;
   mutable std::mutex mu_;

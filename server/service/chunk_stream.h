@@ -230,11 +230,8 @@ class ChunkStream : public Reactor, public StreamBase {
     ++generation_;
     cancel_->store(true);
     cancel_ = std::make_shared<std::atomic<bool>>(false);
-    for (const auto& c : queue_)
-      if (c.last()) core_->counters.frames_cancelled.fetch_add(1);
-    queue_.clear();
     // A view replaced before its frame started counts as a cancelled frame too.
-    if (pending_) core_->counters.frames_cancelled.fetch_add(1);
+    DropQueuedLocked();
     pending_ = std::move(p);
     if (job_running_) return false;
     job_running_ = true;
@@ -252,7 +249,16 @@ class ChunkStream : public Reactor, public StreamBase {
     finishing_ = true;
     finish_status_ = std::move(status);
     cancel_->store(true);
+    DropQueuedLocked();
+  }
+
+  // Drops the queued chunks and the view waiting for a job: both frames count as cancelled (a
+  // running frame counts itself when it stops).
+  void DropQueuedLocked() {
+    for (const auto& c : queue_)
+      if (c.last()) core_->counters.frames_cancelled.fetch_add(1);
     queue_.clear();
+    if (pending_) core_->counters.frames_cancelled.fetch_add(1);
     pending_.reset();
   }
 
@@ -311,7 +317,10 @@ class ChunkStream : public Reactor, public StreamBase {
                        uint64_t generation, std::atomic<bool>* cancel, Clock::time_point received) {
     auto volume = core_->catalogue.Get(view.volume());
     if (!volume.ok()) return volume.status();
-    if (cancel->load()) return absl::CancelledError("superseded");
+    if (cancel->load()) {  // superseded while the volume was being prepared
+      core_->counters.frames_cancelled.fetch_add(1);
+      return absl::CancelledError("superseded");
+    }
     // The retained frame is this stream's for the view (other streams may free it between
     // views, when their own frames need the memory).
     std::lock_guard<std::mutex> using_retained(retained_.mutex());

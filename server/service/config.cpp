@@ -135,17 +135,26 @@ absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
 absl::Status ValidateConfig(const DaemonConfig& c) {
   auto bad = [](const std::string& m) { return absl::InvalidArgumentError(m); };
   if (c.threads < 0 || c.threads > 1024) return bad("threads must be in 0..1024");
-  if (c.limits.max_sessions < 1) return bad("max_sessions must be at least 1");
+  // Each admissible session has a frame thread of its own, started with the daemon.
+  if (c.limits.max_sessions < 1 || c.limits.max_sessions > 4096)
+    return bad("max_sessions must be in 1..4096");
   if (c.cache_max_mb < 1 || c.cache_max_mb > (int64_t{1} << 30))
     return bad("cache_max_mb must be in 1..1073741824");
   if (c.limits.max_triangles < 1) return bad("max_triangles must be at least 1");
   if (c.limits.max_isovalues < 1 || c.limits.max_isovalues > 16)
     return bad("max_isovalues must be in 1..16");
-  if (c.limits.deadline_ms < 1) return bad("deadline_ms must be at least 1");
+  // A day at most: far past any frame, and clock arithmetic overflowed past ~292 years (every
+  // frame then failed at once).
+  if (c.limits.deadline_ms < 1 || c.limits.deadline_ms > 86'400'000)
+    return bad("deadline_ms must be in 1..86400000");
   if (c.limits.max_dim < 2 || c.limits.max_dim > 4097) return bad("max_dim must be in 2..4097");
   if (c.limits.idle_timeout_s < 0 || c.limits.idle_timeout_s > 7 * 86400)
     return bad("idle_timeout_s must be in 0 (off)..604800");
   if (c.tls_cert.empty() != c.tls_key.empty()) return bad("TLS needs both a certificate and a key");
+  // What a client can send in a header value (gRPC refuses the rest, so no call could pass).
+  for (const char ch : c.token)
+    if (ch < 0x20 || ch > 0x7e)
+      return bad("token must be printable ASCII (no control or non-ASCII characters)");
   // Chunks must stay under gRPC's 4 MiB message limit: a Draco chunk needs at most about 40
   // bytes per triangle (no shared vertices, indices stored plainly); raw chunks are cut at
   // kMaxRawChunkTriangles regardless.

@@ -358,6 +358,45 @@ TEST_F(Daemon, NewViewCancelsOldFrameAndCoarseArrivesBeforeRefined) {
   EXPECT_GE(after.frames_cancelled(), before->frames_cancelled() + 1);
 }
 
+// Views replaced while their volume is still being prepared (the frame never starts) count as
+// cancelled frames too, as the proto says; they were not counted.
+TEST_F(Daemon, ViewsSupersededWhileTheVolumePreparesCountAsCancelled) {
+  auto c = Connect();
+  auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  net::Session& s = **session;
+  // A volume no other test uses, so the first view's job waits for its preparation (~0.1-1 s):
+  // the next views arrive meanwhile. (Whether they do or not, every view must be counted.)
+  const std::string volume = "noise:129:7";
+  for (uint64_t id = 1; id <= 3; ++id) {
+    ASSERT_TRUE(s.Send(MakeView(volume, id, 0.3, glm::dvec3(3, 2, 1.0 + double(id)))).ok());
+    if (id == 1) std::this_thread::sleep_for(std::chrono::milliseconds(30));  // the job starts
+  }
+  ASSERT_TRUE(s.CloseSend().ok());
+  net::FrameAssembler assembler;
+  pb::FrameChunk chunk;
+  std::vector<uint64_t> frames;
+  while (s.Read(&chunk)) {
+    ASSERT_TRUE(assembler.Add(chunk).ok());
+    if (assembler.complete()) frames.push_back(assembler.Take().id);
+  }
+  const absl::Status finished = s.Finish();
+  EXPECT_TRUE(finished.ok()) << finished;
+  ASSERT_FALSE(frames.empty());
+  EXPECT_EQ(frames.back(), 3u);
+  pb::ServerStats after;
+  ASSERT_TRUE(WaitForStats(
+      c.get(), [](const pb::ServerStats& st) { return st.sessions_open() == 0; }, &after));
+  // Every view is either sent whole or counted as cancelled.
+  EXPECT_EQ((after.frames_sent() - before->frames_sent()) +
+                (after.frames_cancelled() - before->frames_cancelled()),
+            3)
+      << "sent " << after.frames_sent() - before->frames_sent() << ", cancelled "
+      << after.frames_cancelled() - before->frames_cancelled();
+}
+
 TEST_F(Daemon, SessionLimitIsResourceExhausted) {
   auto c = Connect();
   std::vector<std::unique_ptr<net::Session>> open;

@@ -50,7 +50,19 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   EXPECT_EQ(image->height, 160);
   EXPECT_GT(Coverage(*image), 0.1) << "the surfaces should fill a good part of the picture";
 
-  // An orbit asks the server for a new, newly ordered frame per view.
+  // An orbit asks the server for a new, newly ordered frame per view. It writes orbit_NNN.png,
+  // never orbit.png itself: a folder of that name is no obstacle (it was refused), and one
+  // named like a frame it will write is refused before any frame (it failed after the first).
+  std::filesystem::create_directory(dir.path() + "/orbit.png");
+  std::filesystem::create_directory(dir.path() + "/blocked_001.png");
+  const ViewRun blocked =
+      View("--server " + daemon.address() +
+           " --volume sphere:33 --iso 0.3 --budget 5000 --orbit 3 --size 64x64 -o " + dir.path() +
+           "/blocked.png");
+  EXPECT_EQ(blocked.code, 2) << blocked.output;
+  EXPECT_NE(blocked.output.find("blocked_001.png is a directory"), std::string::npos)
+      << blocked.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.path() + "/blocked_000.png"));
   const ViewRun orbit =
       View("--server " + daemon.address() +
            " --volume sphere:33 --iso 0.3,0.6 --budget 5000 --orbit 3 --size 64x64 -o " +
