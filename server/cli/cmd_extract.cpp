@@ -49,6 +49,16 @@ int RunExtract(const ExtractArgs& args) {
     std::cerr << "isostream extract: " << out.message() << "\n";
     return 2;
   }
+  // The view's flags too (only the default eye needs the volume): a typo in --iso was reported
+  // after minutes of preparing a large volume.
+  {
+    const auto early = MakeRequest(args.view, Volume{});
+    const absl::Status valid = early.ok() ? ValidateRequest(*early) : early.status();
+    if (!valid.ok()) {
+      std::cerr << "isostream extract: " << valid.message() << "\n";
+      return 2;
+    }
+  }
   auto prepared = Prepare(args.volume);
   if (!prepared.ok()) {
     std::cerr << "isostream extract: " << prepared.status().message() << "\n";

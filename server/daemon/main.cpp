@@ -2,11 +2,11 @@
 //
 // Settings come from defaults, then --config FILE.json, then flags. It listens on 127.0.0.1
 // unless told otherwise, prints "listening on HOST:PORT" on stdout once it accepts calls (port
-// 0 picks a free port), and on SIGINT/SIGTERM/SIGHUP turns its health status to NOT_SERVING, refuses
-// new streams, lets frames in flight finish (bounded wait) and exits 0.
+// 0 picks a free port), and on SIGINT/SIGTERM/SIGHUP turns its health status to NOT_SERVING,
+// refuses new streams, lets frames in flight finish (bounded wait) and exits 0.
+#include <google/protobuf/stubs/logging.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
-#include <google/protobuf/stubs/logging.h>
 #include <grpcpp/security/server_credentials.h>
 #include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -105,12 +105,11 @@ int Run(const DaemonConfig& config) {
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || port == 0) {
-    spdlog::critical("cannot listen on {}: the port is in use, or the address is not this "
-                     "machine's{}",
-                     config.listen,
-                     config.tls_cert.empty()
-                         ? ""
-                         : ", or the TLS certificate and key do not belong together");
+    spdlog::critical(
+        "cannot listen on {}: the port is in use, or the address is not this "
+        "machine's{}",
+        config.listen,
+        config.tls_cert.empty() ? "" : ", or the TLS certificate and key do not belong together");
     return 1;
   }
   // Health checks that name the service (as Kubernetes' gRPC probes may) see it too, not only
@@ -129,7 +128,9 @@ int Run(const DaemonConfig& config) {
   int sig = 0;
   sigwait(&signals, &sig);
   spdlog::info("{}: stopping (health NOT_SERVING, finishing frames in flight)",
-               sig == SIGINT ? "SIGINT" : sig == SIGHUP ? "SIGHUP" : "SIGTERM");
+               sig == SIGINT   ? "SIGINT"
+               : sig == SIGHUP ? "SIGHUP"
+                               : "SIGTERM");
 
   if (auto* health = server->GetHealthCheckService()) health->SetServingStatus(false);
   service.BeginShutdown();

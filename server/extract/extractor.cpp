@@ -55,7 +55,9 @@ absl::Status ValidateRequest(const ExtractRequest& r) {
     if (sorted[i] == sorted[i - 1]) {
       char shown[32];
       std::snprintf(shown, sizeof(shown), "%g", double(sorted[i]));
-      return absl::InvalidArgumentError(std::string("isovalue ") + shown + " is given twice");
+      return absl::InvalidArgumentError(std::string("isovalue ") + shown +
+                                        " is given twice (isovalues are compared in single "
+                                        "precision, as the samples are)");
     }
   if (r.budget < 0) return absl::InvalidArgumentError("triangle budget must be positive");
   if (r.budget == 0 && !(r.eps >= 0 && std::isfinite(r.eps)))

@@ -161,8 +161,9 @@ class LeafEmitter {
 
   // A component of a leaf that straddles the data box, clipped there. One whose triangles all
   // fall outside makes no vertices (they would be used by nothing). Out of line: rare.
-  __attribute__((noinline)) int StraddlingComponent(const Node& t, int s, const MarchingTetsCase& mc,
-                                                    unsigned above, unsigned at_iso) {
+  __attribute__((noinline)) int StraddlingComponent(const Node& t, int s,
+                                                    const MarchingTetsCase& mc, unsigned above,
+                                                    unsigned at_iso) {
     const int n = StraddlingComponentTriangles(c_, t, s, mc, above, at_iso);
     if (!kEmit || n == 0) return n;
     return ComponentThroughCorners(t, s, mc, above, at_iso, true);
@@ -173,21 +174,21 @@ class LeafEmitter {
   // without an area is not emitted (most of a terrace's triangles had none). Also the path of
   // straddling leaves (`clip`), with or without such corners. Out of line: rare.
   __attribute__((noinline)) int ComponentThroughCorners(const Node& t, int s,
-                                                        const MarchingTetsCase& mc,
-                                                        unsigned above, unsigned at_iso,
-                                                        bool clip) {
+                                                        const MarchingTetsCase& mc, unsigned above,
+                                                        unsigned at_iso, bool clip) {
     const int edges = mc.edge_count;
-    int where[4];  // the corner a crossing sits on, or 4 + its edge
+    int where[4];                 // the corner a crossing sits on, or 4 + its edge
     int cycle[4] = {0, 1, 2, 3};  // the crossings in the fan's order
     glm::dvec3 p[4];              // their positions as stored
     for (int i = 0; i < edges; ++i) {
       where[i] = CrossingPlace(mc, above, at_iso, i);
       const int ia = mc.edge[i][0], ib = mc.edge[i][1];
-      p[i] = glm::dvec3(where[i] < 4 ? CornerWorld(c_, t.v[where[i]])
-                                     : EdgeCrossingWorld(c_, t.v[ia], t.v[ib], t.f[ia], t.f[ib],
-                                                         c_.iso[s]));
+      p[i] = glm::dvec3(where[i] < 4
+                            ? CornerWorld(c_, t.v[where[i]])
+                            : EdgeCrossingWorld(c_, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c_.iso[s]));
     }
-    if (edges == 4 && extract_internal::QuadSplitsAlong13(p)) std::rotate(cycle, cycle + 1, cycle + 4);
+    if (edges == 4 && extract_internal::QuadSplitsAlong13(p))
+      std::rotate(cycle, cycle + 1, cycle + 4);
     auto has_area = [&](int k) {  // fan triangle (0, k, k + 1)
       const int a = where[cycle[0]], b = where[cycle[k]], d = where[cycle[k + 1]];
       return a != b && b != d && a != d;

@@ -85,7 +85,6 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
            out,
        "--max-frame-triangles"},
 
-
   };
   for (const auto& c : cases) {
     const CliRun r = Cli(c.args + " --no-cache");
@@ -132,8 +131,7 @@ TEST(Cli, IsovaluesOutsideTheDataAreNamed) {
   const CliRun r = Cli("extract --volume sphere:17 --iso 0,5 --eps 0 --no-cache -o " +
                        TempPath("cli-outside.ply"));
   EXPECT_EQ(r.code, 0) << r.output;
-  EXPECT_NE(r.output.find("isovalue 5 lies outside the volume's values [0, 1.7"),
-            std::string::npos)
+  EXPECT_NE(r.output.find("isovalue 5 lies outside the volume's values [0, 1.7"), std::string::npos)
       << r.output;
   EXPECT_EQ(r.output.find("isovalue 0 lies"), std::string::npos) << r.output;
 }
@@ -188,6 +186,22 @@ TEST(Cli, InfoPrintsTheTriangleCountByEps) {
   const CliRun twice = Cli("info --volume cayley:4097 --iso 0.1,0.1 --no-cache");
   EXPECT_EQ(twice.code, 2);
   EXPECT_NE(twice.output.find("isovalue 0.1 is given twice"), std::string::npos) << twice.output;
+  // extract likewise: its view flags are checked before the volume is prepared (they were after).
+  const std::string early_ply = ::testing::TempDir() + "/early.ply";
+  const std::pair<std::string, std::string> refused[] = {
+      {"--iso 0.1,0.1 --eps 0", "isovalue 0.1 is given twice"},
+      {"--iso 0.1 --eps 0 --eye 1,2", "--eye needs x,y,z"},
+      {"--iso 0.1", "give --eps E"},
+      {"--iso 0.1 --budget 0", "--budget must be a positive"},
+      {"--iso 1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17 --eps 0", "at most 16 isovalues"}};
+  for (const auto& [flags, reason] : refused) {
+    const CliRun refusal =
+        Cli("extract --volume cayley:4097 --no-cache " + flags + " -o " + early_ply);
+    EXPECT_EQ(refusal.code, 2) << flags << "\n" << refusal.output;
+    EXPECT_NE(refusal.output.find(reason), std::string::npos) << flags << "\n" << refusal.output;
+    EXPECT_EQ(refusal.output.find("lies outside"), std::string::npos) << flags << "\n"
+                                                                      << refusal.output;
+  }
 }
 
 // Spaces around the numbers of a list are allowed on either side; an empty item is not.

@@ -26,10 +26,10 @@ struct RawVolume {
 
 // Integer values 0..4 (crossings land on grid points and on the box's faces exactly).
 RawVolume RandomIntegers(int nx, int ny, int nz, unsigned seed) {
-  RawVolume v{"integers " + std::to_string(nx) + "x" + std::to_string(ny) + "x" +
-                  std::to_string(nz),
-              {nx, ny, nz},
-              {}};
+  RawVolume v{
+      "integers " + std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz),
+      {nx, ny, nz},
+      {}};
   std::mt19937 rng(seed);
   for (int i = 0; i < nx * ny * nz; ++i) v.values.push_back(float(rng() % 5));
   return v;
@@ -65,8 +65,8 @@ PreparedVolume Prepare(const RawVolume& raw, const testing::ScratchDir& dir) {
   const std::string spec = "raw:" + path + ":" + std::to_string(raw.dims[0]) + "x" +
                            std::to_string(raw.dims[1]) + "x" + std::to_string(raw.dims[2]) +
                            ":float32";
-  auto prepared = PrepareVolume(spec, VolumeLimits{}, HierarchyCacheOptions{},
-                                HierarchyBuildOptions{});
+  auto prepared =
+      PrepareVolume(spec, VolumeLimits{}, HierarchyCacheOptions{}, HierarchyBuildOptions{});
   EXPECT_TRUE(prepared.ok()) << prepared.status();
   return prepared.ok() ? std::move(*prepared) : PreparedVolume{};
 }
@@ -98,7 +98,8 @@ void ExpectCleanMesh(const OrderedMesh& m, const RawVolume& raw, const std::stri
     for (int a = 0; a < 3; ++a)  // unit spacing, origin 0: the box is [0, dims - 1]
       outside += !(m.positions[3 * v + a] >= 0 && m.positions[3 * v + a] <= raw.dims[a] - 1);
     const float* n = &m.normals[3 * v];
-    const double length = std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
+    const double length =
+        std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
     bad_normals += !(std::abs(length - 1) < 1e-4 || length == 0);
   }
   EXPECT_EQ(unused, 0u) << what;
@@ -117,8 +118,8 @@ TEST(ExtractDataBox, CountsWhatItEmitsAndBudgetsBoundTheFrame) {
     for (const std::vector<float>& iso : {std::vector<float>{0.5f, 3.0f}, {-0.3f, 0.6f}, {3.0f}}) {
       int64_t largest = 0;
       for (double eps : {0.0, 0.1, 0.5, 1.0, 3.0}) {
-        const std::string what = raw.name + " iso " + std::to_string(iso[0]) + ".. eps " +
-                                 std::to_string(eps);
+        const std::string what =
+            raw.name + " iso " + std::to_string(iso[0]) + ".. eps " + std::to_string(eps);
         const auto res = Extract(*v.hierarchy, v.grid_to_world, Request(iso, eps, 0));
         ASSERT_TRUE(res.ok()) << what << ": " << res.status();
         const auto counted =
@@ -130,8 +131,8 @@ TEST(ExtractDataBox, CountsWhatItEmitsAndBudgetsBoundTheFrame) {
       }
       for (int64_t budget : {largest / 7, largest / 3, largest / 2}) {
         if (budget <= 0) continue;
-        const std::string what = raw.name + " iso " + std::to_string(iso[0]) + ".. budget " +
-                                 std::to_string(budget);
+        const std::string what =
+            raw.name + " iso " + std::to_string(iso[0]) + ".. budget " + std::to_string(budget);
         const auto res = Extract(*v.hierarchy, v.grid_to_world, Request(iso, 0, budget));
         ASSERT_TRUE(res.ok()) << what << ": " << res.status();
         EXPECT_LE(int64_t(res->mesh.triangle_count()), budget) << what;
