@@ -1,5 +1,7 @@
 #include "server/service/config.h"
 
+#include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -35,15 +37,24 @@ absl::Status Get(const json& object, const char* key, const std::string& where, 
   auto it = object.find(key);
   if (it == object.end()) return absl::OkStatus();
   if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+    // A whole number written with a fraction or an exponent (1e3, 30000.0) is one too.
+    const double d = it->is_number_float() ? it->get<double>() : 0.0;
+    const bool whole_float = it->is_number_float() && std::trunc(d) == d &&
+                             d >= double(std::numeric_limits<T>::min()) &&
+                             d <= double(std::numeric_limits<T>::max());
     const bool fits =
         it->is_number_unsigned()  ? it->get<uint64_t>() <= uint64_t(std::numeric_limits<T>::max())
         : it->is_number_integer() ? it->get<int64_t>() >= int64_t(std::numeric_limits<T>::min()) &&
                                         it->get<int64_t>() <= int64_t(std::numeric_limits<T>::max())
-                                  : false;
+                                  : whole_float;
     if (it->is_number() && !fits)
       return absl::InvalidArgumentError("'" + where + key + "' must be a whole number in " +
                                         std::to_string(std::numeric_limits<T>::min()) + ".." +
                                         std::to_string(std::numeric_limits<T>::max()));
+    if (whole_float) {
+      *out = T(d);
+      return absl::OkStatus();
+    }
   }
   try {
     *out = it->get<T>();
@@ -107,6 +118,9 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
 }  // namespace
 
 absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    return absl::InvalidArgumentError("config file '" + path + "' is a directory");
   std::ifstream in(path);
   if (!in) return absl::NotFoundError("cannot open config file '" + path + "'");
   std::stringstream text;

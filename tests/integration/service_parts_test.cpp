@@ -135,6 +135,23 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
         << listen;
   for (const char* listen : {"127.0.0.1:0", "0.0.0.0:65535", "[::1]:7878", "localhost:7878"})
     EXPECT_EQ(message(std::string(R"({"listen": ")") + listen + "\"}"), "") << listen;
+  // Bounds past which the daemon could not work: every frame failed at once past ~9.2e12 ms
+  // (clock overflow), and each session slot is a thread made at start.
+  EXPECT_NE(message(R"({"limits": {"deadline_ms": 10000000000000}})").find("deadline_ms"),
+            std::string::npos);
+  EXPECT_NE(message(R"({"limits": {"max_sessions": 2000000000}})").find("max_sessions"),
+            std::string::npos);
+  EXPECT_NE(message("{\"token\": \"caf\u00e9\"}").find("printable ASCII"), std::string::npos);
+  EXPECT_EQ(message(R"({"token": "a b"})"), "");
+  // Whole numbers written as JSON floats are whole numbers.
+  DaemonConfig c;
+  ASSERT_TRUE(LoadText(R"({"limits": {"deadline_ms": 1e3, "max_sessions": 3.0}})", &c).ok());
+  EXPECT_EQ(c.limits.deadline_ms, 1000);
+  EXPECT_EQ(c.limits.max_sessions, 3);
+  // A directory is named as one, not as invalid JSON.
+  ScratchDir dir;
+  const absl::Status folder = LoadConfigFile(dir.path(), &c);
+  EXPECT_NE(folder.message().find("is a directory"), std::string::npos) << folder;
 }
 
 // The example deploy/ ships names every key with a valid value.
