@@ -11,9 +11,12 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
+#include <type_traits>
 #include <vector>
 
 #include "server/volume/grid_builder.h"
+#include "shared/number_list.h"
 
 namespace isostream {
 namespace {
@@ -47,6 +50,14 @@ T LoadSample(const unsigned char* p, bool swap) {
   return v;
 }
 
+// A sample in single precision. Past the float range a value is infinite (and refused as such
+// by the grid builder): converting it would be undefined.
+inline float ToFloat(double v) {
+  if (std::abs(v) <= double(std::numeric_limits<float>::max())) return static_cast<float>(v);
+  if (std::isnan(v)) return std::numeric_limits<float>::quiet_NaN();
+  return std::copysign(std::numeric_limits<float>::infinity(), static_cast<float>(v > 0 ? 1 : -1));
+}
+
 // One templated loop per type, chosen once per slab.
 template <typename T>
 void Decode(const unsigned char* in, size_t count, bool swap, double slope, double inter,
@@ -54,12 +65,17 @@ void Decode(const unsigned char* in, size_t count, bool swap, double slope, doub
   tbb::parallel_for(
       tbb::blocked_range<size_t>(0, count, 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
         if (slope == 1 && inter == 0) {
-          for (size_t i = r.begin(); i != r.end(); ++i)
-            out[i] = static_cast<float>(LoadSample<T>(in + i * sizeof(T), swap));
+          for (size_t i = r.begin(); i != r.end(); ++i) {
+            const T v = LoadSample<T>(in + i * sizeof(T), swap);
+            if constexpr (std::is_same_v<T, double>)
+              out[i] = ToFloat(v);  // the only type whose values can pass the float range
+            else
+              out[i] = static_cast<float>(v);
+          }
         } else {
           for (size_t i = r.begin(); i != r.end(); ++i)
-            out[i] = static_cast<float>(
-                static_cast<double>(LoadSample<T>(in + i * sizeof(T), swap)) * slope + inter);
+            out[i] = ToFloat(static_cast<double>(LoadSample<T>(in + i * sizeof(T), swap)) * slope +
+                             inter);
         }
       });
 }
@@ -259,7 +275,13 @@ absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout
     DecodeSamples(layout, raw.data(), count, slab.data());
     absl::Status status = builder.AddSlab(s, slab.data());
     if (!status.ok()) {
-      return absl::Status(status.code(), input.path() + ": " + std::string(status.message()));
+      // A sample that the header's scaling made infinite: say so (the stored value was finite).
+      const bool scaled = layout.slope != 1 || layout.inter != 0;
+      return absl::Status(
+          status.code(), input.path() + ": " + std::string(status.message()) +
+                             (scaled ? " after scaling by scl_slope " + ShortestText(layout.slope) +
+                                           ", scl_inter " + ShortestText(layout.inter)
+                                     : ""));
     }
   }
   return builder.Finish(std::move(name), grid_name, spacing, origin);

@@ -123,8 +123,7 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
       {"transform.vdb", map, 0x7f000000u, "transform type claims", 0},
       {"root_tiles.vdb", root_tiles, 0x10000000u, "root claims 268435456 tiles", 0},
       {"root_children.vdb", root_tiles + 4, 3, "and 3 children", root_tiles},
-      {"grid_count.vdb", grid_count, 0x10000000u, "grid count 268435456 does not fit the file",
-       0},
+      {"grid_count.vdb", grid_count, 0x10000000u, "grid count 268435456 does not fit the file", 0},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
@@ -473,6 +472,18 @@ TEST(VolumeLoadErrors, NonFiniteSamples) {
   path = ScratchPath("overflow.nii");
   WriteBytes(path, Concat(nf.Header(), data));
   ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "overflow.nii", "(1, 1, 0)");
+  // Finite stored values that the header's scaling takes past the float range: named as such.
+  NiftiFile scaled;
+  scaled.dims = dims;
+  scaled.datatype = 2;  // uint8
+  scaled.bitpix = 8;
+  scaled.slope = 1e38f;
+  std::vector<unsigned char> bytes8(120, 0);
+  bytes8[7] = 200;  // (3, 1, 0)
+  path = ScratchPath("scaled.nii");
+  WriteBytes(path, Concat(scaled.Header(), bytes8));
+  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "scaled.nii",
+              "Inf sample at index (3, 1, 0) after scaling by scl_slope");
 
   auto grid = TestGrid("density", 1.0f);
   grid->tree().setValue(openvdb::Coord(4, 10, 12), std::numeric_limits<float>::infinity());
