@@ -27,13 +27,16 @@ namespace {
 using isostream::service::DaemonConfig;
 
 // The signals that stop the daemon gracefully. SIGHUP too: a closing terminal sends it, and its
-// default action ended the process at once, cutting frames in flight.
+// default action ended the process at once, cutting frames in flight; but not when it was
+// ignored at start (nohup), since a blocked signal is queued for sigwait even then.
 sigset_t StopSignals() {
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
-  sigaddset(&signals, SIGHUP);
+  struct sigaction hangup;
+  if (sigaction(SIGHUP, nullptr, &hangup) != 0 || hangup.sa_handler != SIG_IGN)
+    sigaddset(&signals, SIGHUP);
   return signals;
 }
 

@@ -138,18 +138,22 @@ inline int StraddlingComponentTriangles(const Context& c, const Node& t, int s,
   for (int i = 0; i < edges; ++i) {
     where[i] = CrossingPlace(mc, above, at_iso, i);
     const int ia = mc.edge[i][0], ib = mc.edge[i][1];
-    p[i] = glm::dvec3(where[i] < 4 ? CornerWorld(c, t.v[where[i]])
-                                   : EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib],
-                                                       c.iso[s]));
+    p[i] = glm::dvec3(where[i] < 4
+                          ? CornerWorld(c, t.v[where[i]])
+                          : EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c.iso[s]));
   }
   if (edges == 4 && QuadSplitsAlong13(p)) {
     std::rotate(p, p + 1, p + 4);
     std::rotate(where, where + 1, where + 4);
   }
+  // In the emitter's corner order (its winding flip included): the clip's crossings are
+  // computed along the polygon's edges, so the reversed triangle can differ in a last bit.
+  const bool flip = mc.flip[c.negative[t.cls.value]];
   int n = 0;
   for (int k = 1; k + 1 < edges; ++k) {  // the fan (0, k, k + 1)
     if (where[0] == where[k] || where[k] == where[k + 1] || where[0] == where[k + 1]) continue;
-    n += ClippedTriangleCount(c, glm::vec3(p[0]), glm::vec3(p[k]), glm::vec3(p[k + 1]));
+    n += ClippedTriangleCount(c, glm::vec3(p[0]), glm::vec3(p[flip ? k + 1 : k]),
+                              glm::vec3(p[flip ? k : k + 1]));
   }
   return n;
 }

@@ -120,7 +120,7 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
     if (options_.volumes.empty()) return prepared.status();
     entry->failed = absl::FailedPreconditionError(
         "volume " + Quoted(name) + " could not be prepared on the daemon (see its log)");
-    entry->failed_at = now;
+    entry->failed_at = std::chrono::steady_clock::now();  // a slow failure gets its 30 s too
     return entry->failed;
   }
   auto served = std::make_shared<ServedVolume>();

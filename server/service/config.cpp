@@ -9,6 +9,7 @@
 #include <sstream>
 #include <type_traits>
 
+#include "shared/frame_codec.h"
 #include "shared/number_list.h"
 
 namespace isostream::service {
@@ -41,7 +42,9 @@ absl::Status Get(const json& object, const char* key, const std::string& where, 
     const double d = it->is_number_float() ? it->get<double>() : 0.0;
     const bool whole_float = it->is_number_float() && std::trunc(d) == d &&
                              d >= double(std::numeric_limits<T>::min()) &&
-                             d <= double(std::numeric_limits<T>::max());
+                             // max + 1 is a power of two, exact in double (max itself may round
+                             // up to it, and converting that is undefined)
+                             d < double(std::numeric_limits<T>::max()) + 1.0;
     const bool fits =
         it->is_number_unsigned()  ? it->get<uint64_t>() <= uint64_t(std::numeric_limits<T>::max())
         : it->is_number_integer() ? it->get<int64_t>() >= int64_t(std::numeric_limits<T>::min()) &&
@@ -172,8 +175,8 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   // Chunks must stay under gRPC's 4 MiB message limit: a Draco chunk needs at most about 40
   // bytes per triangle (no shared vertices, indices stored plainly); raw chunks are cut at
   // kMaxRawChunkTriangles regardless.
-  if (c.chunk_triangles < 256 || c.chunk_triangles > 65536)
-    return bad("chunk_triangles must be in 256..65536");
+  if (c.chunk_triangles < 256 || c.chunk_triangles > int(kMaxStreamChunkTriangles))
+    return bad("chunk_triangles must be in 256.." + std::to_string(kMaxStreamChunkTriangles));
   if (c.first_chunk_triangles < 256 || c.first_chunk_triangles > c.chunk_triangles)
     return bad("first_chunk_triangles must be in 256..chunk_triangles");
   if (c.coarse_triangles < 100) return bad("coarse_triangles must be at least 100");

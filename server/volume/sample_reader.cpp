@@ -15,6 +15,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "server/volume/grid_builder.h"
 #include "shared/number_list.h"
 
@@ -275,13 +276,16 @@ absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout
     DecodeSamples(layout, raw.data(), count, slab.data());
     absl::Status status = builder.AddSlab(s, slab.data());
     if (!status.ok()) {
-      // A sample that the header's scaling made infinite: say so (the stored value was finite).
-      const bool scaled = layout.slope != 1 || layout.inter != 0;
+      // An infinite sample may be a finite stored value the header's scaling took past the
+      // float range: the scaling is named with it.
+      const bool scaled = (layout.slope != 1 || layout.inter != 0) &&
+                          absl::StartsWith(status.message(), "Inf sample");
       return absl::Status(
-          status.code(), input.path() + ": " + std::string(status.message()) +
-                             (scaled ? " after scaling by scl_slope " + ShortestText(layout.slope) +
-                                           ", scl_inter " + ShortestText(layout.inter)
-                                     : ""));
+          status.code(),
+          input.path() + ": " + std::string(status.message()) +
+              (scaled ? " (samples scaled by scl_slope " + ShortestText(float(layout.slope)) +
+                            ", scl_inter " + ShortestText(float(layout.inter)) + ")"
+                      : ""));
     }
   }
   return builder.Finish(std::move(name), grid_name, spacing, origin);

@@ -35,12 +35,14 @@ RawVolume RandomIntegers(int nx, int ny, int nz, unsigned seed) {
   return v;
 }
 
-RawVolume Smooth(int nx, int ny, int nz) {
-  RawVolume v{"smooth", {nx, ny, nz}, {}};
+RawVolume Smooth(int nx, int ny, int nz, double fx = 0.21, double fy = 0.17, double fz = 0.23) {
+  RawVolume v{"smooth " + std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz),
+              {nx, ny, nz},
+              {}};
   for (int z = 0; z < nz; ++z)
     for (int y = 0; y < ny; ++y)
       for (int x = 0; x < nx; ++x)
-        v.values.push_back(float(std::sin(0.21 * x) + std::cos(0.17 * y) * std::sin(0.23 * z)));
+        v.values.push_back(float(std::sin(fx * x) + std::cos(fy * y) * std::sin(fz * z)));
   return v;
 }
 
@@ -80,7 +82,8 @@ ExtractRequest Request(const std::vector<float>& iso, double eps, int64_t budget
   return r;
 }
 
-void ExpectCleanMesh(const OrderedMesh& m, const RawVolume& raw, const std::string& what) {
+void ExpectCleanMesh(const OrderedMesh& m, const RawVolume& raw, const GridToWorld& xf,
+                     const std::string& what) {
   EXPECT_TRUE(ValidateMesh(m).ok()) << what << ": " << ValidateMesh(m);
   std::vector<char> used(m.vertex_count(), 0);
   for (uint32_t i : m.triangles) used[i] = 1;
@@ -95,8 +98,11 @@ void ExpectCleanMesh(const OrderedMesh& m, const RawVolume& raw, const std::stri
     coincident += same(p[0], p[1]) || same(p[1], p[2]) || same(p[0], p[2]);
   }
   for (size_t v = 0; v < m.vertex_count(); ++v) {
-    for (int a = 0; a < 3; ++a)  // unit spacing, origin 0: the box is [0, dims - 1]
-      outside += !(m.positions[3 * v + a] >= 0 && m.positions[3 * v + a] <= raw.dims[a] - 1);
+    for (int a = 0; a < 3; ++a) {  // the box, in single precision as positions are
+      const float lo = float(xf.origin[a]);
+      const float hi = float(xf.origin[a]) + float(xf.spacing[a]) * float(raw.dims[a] - 1);
+      outside += !(m.positions[3 * v + a] >= lo && m.positions[3 * v + a] <= hi);
+    }
     const float* n = &m.normals[3 * v];
     const double length =
         std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
@@ -110,35 +116,51 @@ void ExpectCleanMesh(const OrderedMesh& m, const RawVolume& raw, const std::stri
 
 TEST(ExtractDataBox, CountsWhatItEmitsAndBudgetsBoundTheFrame) {
   testing::ScratchDir dir;
-  const std::vector<RawVolume> volumes = {RandomIntegers(19, 12, 2, 5), RandomIntegers(9, 14, 6, 8),
-                                          Smooth(23, 9, 14), OppositeNormalsAtTheBox()};
+  // (30x22x10 at iso -0.3, 0.6, eps 0.3 counted 1550 triangles and emitted 1551 when the counts
+  // clipped each triangle in the other corner order.)
+  std::vector<RawVolume> volumes = {RandomIntegers(19, 12, 2, 5), RandomIntegers(9, 14, 6, 8),
+                                    Smooth(23, 9, 14), OppositeNormalsAtTheBox(),
+                                    Smooth(30, 22, 10, 0.1552, 0.398, 0.0936)};
+  // More odd shapes and frequencies.
+  std::mt19937 rng(12);
+  for (int i = 0; i < 8; ++i) {
+    auto f = [&] { return 0.05 + 0.4 * double(rng() % 1000) / 1000.0; };
+    const int nx = 2 + int(rng() % 40), ny = 2 + int(rng() % 40), nz = 2 + int(rng() % 20);
+    const double fx = f(), fy = f(), fz = f();
+    volumes.push_back(Smooth(nx, ny, nz, fx, fy, fz));
+  }
   for (const RawVolume& raw : volumes) {
     const PreparedVolume v = Prepare(raw, dir);
     ASSERT_NE(v.hierarchy, nullptr) << raw.name;
-    for (const std::vector<float>& iso : {std::vector<float>{0.5f, 3.0f}, {-0.3f, 0.6f}, {3.0f}}) {
-      int64_t largest = 0;
-      for (double eps : {0.0, 0.1, 0.5, 1.0, 3.0}) {
-        const std::string what =
-            raw.name + " iso " + std::to_string(iso[0]) + ".. eps " + std::to_string(eps);
-        const auto res = Extract(*v.hierarchy, v.grid_to_world, Request(iso, eps, 0));
-        ASSERT_TRUE(res.ok()) << what << ": " << res.status();
-        const auto counted =
-            CountTriangles(*v.hierarchy, v.grid_to_world, Request(iso, eps, 0), eps);
-        ASSERT_TRUE(counted.ok()) << what;
-        EXPECT_EQ(*counted, int64_t(res->mesh.triangle_count())) << what;
-        ExpectCleanMesh(res->mesh, raw, what);
-        largest = std::max(largest, *counted);
+    // Unit voxels at the origin, and odd ones elsewhere (crossings then round differently).
+    GridToWorld odd;
+    odd.spacing = {0.37, 1.9, 0.83};
+    odd.origin = {-3.1, 7.7, 0.4};
+    for (const GridToWorld& xf : {v.grid_to_world, odd})
+      for (const std::vector<float>& iso :
+           {std::vector<float>{0.5f, 3.0f}, {-0.3f, 0.6f}, {3.0f}}) {
+        int64_t largest = 0;
+        for (double eps : {0.0, 0.02, 0.1, 0.3, 0.5, 0.7, 1.5, 3.0}) {
+          const std::string what = raw.name + " spacing " + std::to_string(xf.spacing.x) + " iso " +
+                                   std::to_string(iso[0]) + ".. eps " + std::to_string(eps);
+          const auto res = Extract(*v.hierarchy, xf, Request(iso, eps, 0));
+          ASSERT_TRUE(res.ok()) << what << ": " << res.status();
+          const auto counted = CountTriangles(*v.hierarchy, xf, Request(iso, eps, 0), eps);
+          ASSERT_TRUE(counted.ok()) << what;
+          EXPECT_EQ(*counted, int64_t(res->mesh.triangle_count())) << what;
+          ExpectCleanMesh(res->mesh, raw, xf, what);
+          largest = std::max(largest, *counted);
+        }
+        for (int64_t budget : {largest / 7, largest / 3, largest / 2}) {
+          if (budget <= 0) continue;
+          const std::string what = raw.name + " spacing " + std::to_string(xf.spacing.x) + " iso " +
+                                   std::to_string(iso[0]) + ".. budget " + std::to_string(budget);
+          const auto res = Extract(*v.hierarchy, xf, Request(iso, 0, budget));
+          ASSERT_TRUE(res.ok()) << what << ": " << res.status();
+          EXPECT_LE(int64_t(res->mesh.triangle_count()), budget) << what;
+          ExpectCleanMesh(res->mesh, raw, xf, what);
+        }
       }
-      for (int64_t budget : {largest / 7, largest / 3, largest / 2}) {
-        if (budget <= 0) continue;
-        const std::string what =
-            raw.name + " iso " + std::to_string(iso[0]) + ".. budget " + std::to_string(budget);
-        const auto res = Extract(*v.hierarchy, v.grid_to_world, Request(iso, 0, budget));
-        ASSERT_TRUE(res.ok()) << what << ": " << res.status();
-        EXPECT_LE(int64_t(res->mesh.triangle_count()), budget) << what;
-        ExpectCleanMesh(res->mesh, raw, what);
-      }
-    }
   }
 }
 

@@ -483,7 +483,7 @@ TEST(VolumeLoadErrors, NonFiniteSamples) {
   path = ScratchPath("scaled.nii");
   WriteBytes(path, Concat(scaled.Header(), bytes8));
   ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "scaled.nii",
-              "Inf sample at index (3, 1, 0) after scaling by scl_slope");
+              "Inf sample at index (3, 1, 0) (samples scaled by scl_slope 1e+38, scl_inter 0)");
 
   auto grid = TestGrid("density", 1.0f);
   grid->tree().setValue(openvdb::Coord(4, 10, 12), std::numeric_limits<float>::infinity());
