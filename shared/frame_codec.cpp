@@ -146,6 +146,8 @@ absl::Status DecodeRawPayload(const ChunkHeader& header, const char* payload,
   for (size_t i = 0; i < 3 * vertex_count; ++i) {
     if (!std::isfinite(Load<float>(positions + 4 * i)))
       return absl::DataLossError(absl::StrCat("raw chunk vertex ", i / 3, " is not finite"));
+    if (header.has_normals && !std::isfinite(Load<float>(normals + 4 * i)))
+      return absl::DataLossError(absl::StrCat("raw chunk normal ", i / 3, " is not finite"));
   }
   for (size_t i = 0; i < 3 * triangle_count; ++i) {
     if (Load<uint32_t>(triangles + 4 * i) >= vertex_count) {

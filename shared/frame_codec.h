@@ -135,6 +135,9 @@ inline constexpr size_t kChunkHeaderSize = 24;
 inline constexpr uint32_t kChunkFormatVersion = 1;
 // Upper limit on triangles in one chunk; chunks meant for transport are far smaller.
 inline constexpr uint32_t kMaxChunkTriangles = 1u << 26;
+// Chunks of a stream: isostreamd cuts frames into chunks of at most this many triangles, and
+// clients refuse larger ones before decoding (a small chunk can declare and expand to far more).
+inline constexpr uint32_t kMaxStreamChunkTriangles = 65536;
 // A Draco chunk's payload has at least one byte per this many triangles: the encoder falls back
 // to a codec 2 chunk with uncompressed indices to guarantee it, and decoders use it to reject
 // counts that could not fit in the payload before allocating for them.

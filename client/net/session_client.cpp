@@ -81,33 +81,47 @@ absl::Status FrameAssembler::Add(const pb::FrameChunk& chunk) {
   // is checked against the decoded data below).
   ISOSTREAM_ASSIGN_OR_RETURN(const ChunkHeader header,
                              ReadChunkHeader(chunk.data().data(), chunk.data().size()));
+  // A small chunk can declare (and expand to) far more than a stream's chunks hold.
+  if (header.triangle_count > kMaxStreamChunkTriangles)
+    return absl::DataLossError("chunk " + std::to_string(chunk.chunk_index()) + " declares " +
+                               std::to_string(header.triangle_count) +
+                               " triangles; a stream's chunks hold at most " +
+                               std::to_string(kMaxStreamChunkTriangles));
   if (int64_t(frame_.mesh.triangle_count()) + int64_t(header.triangle_count) > max_triangles_ ||
       int64_t(frame_.mesh.vertex_count()) + int64_t(header.vertex_count) > 3 * max_triangles_)
     return absl::ResourceExhaustedError("frame " + std::to_string(frame_.id) + " grows past " +
                                         std::to_string(max_triangles_) +
                                         " triangles, this client's limit per frame");
-  const size_t before = frame_.mesh.triangle_count();
+  const size_t before = frame_.mesh.triangle_count(), vertices_before = frame_.mesh.vertex_count();
+  // The decoder appends nothing when it fails; a check after it takes the chunk back out, so a
+  // refused chunk leaves the frame as it was.
   ISOSTREAM_RETURN_IF_ERROR(DecodeAnyChunk(chunk.data().data(), chunk.data().size(), &frame_.mesh));
+  auto refuse = [&](const std::string& why) {
+    frame_.mesh.positions.resize(3 * vertices_before);
+    frame_.mesh.normals.resize(3 * vertices_before);
+    frame_.mesh.triangles.resize(3 * before);
+    frame_.mesh.surface.resize(before);
+    return absl::DataLossError(why);
+  };
   if (frame_.mesh.triangle_count() - before != chunk.triangle_count())
-    return absl::DataLossError("chunk triangle count does not match its data");
-  ++next_chunk_;
-  ++frame_.chunks;
-  frame_.bytes += int64_t(chunk.data().size());
+    return refuse("chunk triangle count does not match its data");
   if (chunk.last()) {
     // The last chunk says how many chunks and triangles the frame has: a stream that ends it
     // early must not pass for the whole frame.
-    if (chunk.chunk_count() != next_chunk_)
-      return absl::DataLossError("frame " + std::to_string(frame_.id) + " ended after " +
-                                 std::to_string(next_chunk_) + " chunks, its last chunk says " +
-                                 std::to_string(chunk.chunk_count()));
+    if (chunk.chunk_count() != next_chunk_ + 1)
+      return refuse("frame " + std::to_string(frame_.id) + " ended after " +
+                    std::to_string(next_chunk_ + 1) + " chunks, its last chunk says " +
+                    std::to_string(chunk.chunk_count()));
     if (chunk.has_stats() && chunk.stats().triangles() != int64_t(frame_.mesh.triangle_count()))
-      return absl::DataLossError("frame " + std::to_string(frame_.id) + " has " +
-                                 std::to_string(frame_.mesh.triangle_count()) +
-                                 " triangles, its stats say " +
-                                 std::to_string(chunk.stats().triangles()));
+      return refuse("frame " + std::to_string(frame_.id) + " has " +
+                    std::to_string(frame_.mesh.triangle_count()) + " triangles, its stats say " +
+                    std::to_string(chunk.stats().triangles()));
     frame_.stats = chunk.stats();
     complete_ = true;
   }
+  ++next_chunk_;
+  ++frame_.chunks;
+  frame_.bytes += int64_t(chunk.data().size());
   return absl::OkStatus();
 }
 
@@ -168,8 +182,8 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& opt
   if (options.address.empty()) return absl::InvalidArgumentError("no server address given");
   // :104903 had reached :39367, and :-1 :65535; a port that is no number (127.0.0.1:abc) or
   // none at all had gRPC try port 0 or 443. Unix socket targets have no port.
-  const bool unix_socket = options.address.rfind("unix:", 0) == 0 ||
-                           options.address.rfind("unix-abstract:", 0) == 0;
+  const bool unix_socket =
+      options.address.rfind("unix:", 0) == 0 || options.address.rfind("unix-abstract:", 0) == 0;
   ISOSTREAM_RETURN_IF_ERROR(CheckPort(options.address, /*required=*/!unix_socket));
   auto c = std::unique_ptr<Client>(new Client());
   c->options_ = options;

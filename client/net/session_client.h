@@ -68,8 +68,9 @@ class FrameAssembler {
 
   // Decodes `chunk` into the frame in progress (a new frame id or coarse flag starts a new
   // frame, dropping an incomplete one: that frame was superseded). DataLoss/InvalidArgument
-  // for chunks that do not decode or arrive out of order; ResourceExhausted, before decoding,
-  // for a chunk that takes the frame past max_triangles.
+  // for chunks that do not decode, arrive out of order, or declare more than
+  // kMaxStreamChunkTriangles; ResourceExhausted, before decoding, for a chunk that takes the
+  // frame past max_triangles. A refused chunk leaves the frame in progress as it was.
   absl::Status Add(const pb::FrameChunk& chunk);
   bool complete() const { return complete_; }
   const Frame& frame() const { return frame_; }

@@ -302,6 +302,13 @@ absl::Status ReadVertexAttributes(const draco::PointCloud& points, uint32_t vert
       if (out->tags[v] & kUndefinedNormalBit) std::fill_n(&out->normals[3 * size_t{v}], 3, 0.0f);
     }
   }
+  // As the other codecs check: a lossless Draco attribute can carry any float.
+  for (const float x : out->positions)
+    if (!std::isfinite(x))
+      return absl::DataLossError("Draco payload holds a position that is not finite");
+  for (const float x : out->normals)
+    if (!std::isfinite(x))
+      return absl::DataLossError("Draco payload holds a normal that is not finite");
   return absl::OkStatus();
 }
 

@@ -148,6 +148,9 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
   ASSERT_TRUE(LoadText(R"({"limits": {"deadline_ms": 1e3, "max_sessions": 3.0}})", &c).ok());
   EXPECT_EQ(c.limits.deadline_ms, 1000);
   EXPECT_EQ(c.limits.max_sessions, 3);
+  // 2^63 written as a float is past int64 (the bound once let it through, to INT64_MIN).
+  EXPECT_NE(message(R"({"limits": {"max_triangles": 9223372036854775807.0}})").find("whole number"),
+            std::string::npos);
   // A directory is named as one, not as invalid JSON.
   ScratchDir dir;
   const absl::Status folder = LoadConfigFile(dir.path(), &c);
@@ -343,6 +346,41 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted) << refused;
   EXPECT_EQ(refused_at, sink.chunks_.size());  // the last chunk, before decoding it
   EXPECT_EQ(limited.frame().mesh.triangle_count(), next - sink.chunks_.back().triangle_count());
+
+  // A refused chunk leaves the frame as it was: a chunk whose field miscounts its data, then the
+  // right one, give the frame once (the first had been decoded into it before the check).
+  net::FrameAssembler careful;
+  auto wrong = sink.chunks_[0];
+  wrong.set_triangle_count(wrong.triangle_count() + 1);
+  EXPECT_EQ(careful.Add(wrong).code(), absl::StatusCode::kDataLoss);
+  EXPECT_EQ(careful.frame().mesh.triangle_count(), 0u);
+  for (const auto& c : sink.chunks_) ASSERT_TRUE(careful.Add(c).ok());
+  ASSERT_TRUE(careful.complete());
+  EXPECT_EQ(careful.frame().mesh.triangle_count(), next);
+  EXPECT_EQ(careful.frame().mesh.vertex_count(), [&] {
+    net::FrameAssembler plain;
+    for (const auto& c : sink.chunks_) EXPECT_TRUE(plain.Add(c).ok());
+    return plain.frame().mesh.vertex_count();
+  }());
+
+  // A chunk declaring more triangles than a stream's chunks hold is refused before decoding
+  // (a 64 KB chunk could expand to a million triangles).
+  OrderedMesh many;
+  for (uint32_t t = 0; t <= kMaxStreamChunkTriangles; ++t) {
+    for (int i = 0; i < 3; ++i) {
+      many.positions.insert(many.positions.end(), {float(t), float(i), 0.0f});
+      many.normals.insert(many.normals.end(), {0.0f, 0.0f, 1.0f});
+      many.triangles.push_back(3 * t + uint32_t(i));
+    }
+    many.surface.push_back(0);
+  }
+  ::isostream::v1::FrameChunk big;
+  ASSERT_TRUE(EncodeChunk(many, 0, many.triangle_count(), CodecOptions{}, big.mutable_data()).ok());
+  big.set_triangle_count(uint32_t(many.triangle_count()));
+  net::FrameAssembler bounded;
+  const absl::Status too_big = bounded.Add(big);
+  EXPECT_EQ(too_big.code(), absl::StatusCode::kDataLoss) << too_big;
+  EXPECT_NE(too_big.message().find("at most 65536"), std::string::npos) << too_big;
 }
 
 // A stream's retained frame: recorded unless the stream slides through meshes, charged to the

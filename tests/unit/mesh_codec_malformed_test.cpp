@@ -1,6 +1,8 @@
 // Frame codec on malformed and hostile input: truncations, bit flips, absurd counts, re-sealed
 // payload edits and chunks spliced from others all return an error (or, for an edit that
 // happens to decode, a structurally valid mesh) and leave the destination unchanged.
+#include <draco/compression/encode.h>
+#include <draco/mesh/mesh.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,9 +13,6 @@
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <draco/compression/encode.h>
-#include <draco/mesh/mesh.h>
 
 #include "codec_test_support.h"
 #include "mesh_test_meshes.h"
@@ -30,7 +29,6 @@ using testing::MakeGrid;
 using testing::MakeSphere;
 using testing::Reseal;
 using testing::Shuffled;
-
 
 class MalformedChunks : public ::testing::Test {
  protected:
@@ -78,6 +76,32 @@ TEST_F(MalformedChunks, RawChunkWithANonFinitePositionIsRejected) {
     EXPECT_EQ(TryDecode(raw).code(), absl::StatusCode::kDataLoss) << bad;
   }
   EXPECT_TRUE(TryDecode(chunks_[1]).ok());
+}
+
+// Normals too, in raw chunks and in lossless Draco ones (codec 3 checked both already).
+TEST_F(MalformedChunks, NonFiniteNormalsAndDracoValuesAreRejected) {
+  std::string raw = chunks_[1];
+  uint32_t vertices = 0;
+  std::memcpy(&vertices, raw.data() + 12, sizeof(vertices));
+  const float bad = std::nanf("");
+  std::memcpy(raw.data() + kChunkHeaderSize + 12 * size_t(vertices) + 4, &bad, sizeof(bad));
+  Reseal(&raw);
+  EXPECT_EQ(TryDecode(raw).code(), absl::StatusCode::kDataLoss);
+  // A lossless codec 2 chunk (one triangle) with a NaN position and an infinite normal.
+  static const unsigned char kDraco[] = {
+      0x49, 0x53, 0x43, 0x31, 0x01, 0x02, 0x01, 0x00, 0x01, 0x00, 0x00, 0x00, 0x03, 0x00, 0x00,
+      0x00, 0x88, 0x00, 0x00, 0x00, 0x55, 0x31, 0x89, 0x18, 0x44, 0x52, 0x41, 0x43, 0x4f, 0x02,
+      0x02, 0x01, 0x00, 0x00, 0x00, 0x01, 0x03, 0x00, 0x01, 0x02, 0x03, 0x55, 0x15, 0x03, 0xad,
+      0x2a, 0x03, 0x04, 0x70, 0x81, 0x01, 0x03, 0x00, 0x09, 0x03, 0x00, 0x00, 0x01, 0x09, 0x03,
+      0x00, 0x01, 0x04, 0x02, 0x01, 0x00, 0x02, 0x00, 0x00, 0x01, 0x00, 0x00, 0x00, 0x00, 0x00,
+      0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0xc0, 0x7f,
+      0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00,
+      0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00,
+      0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x7f, 0x00, 0x00, 0x00, 0x00, 0x00,
+      0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x40,
+      0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00};
+  const std::string draco(reinterpret_cast<const char*>(kDraco), sizeof(kDraco));
+  EXPECT_EQ(TryDecode(draco).code(), absl::StatusCode::kDataLoss);
 }
 
 TEST_F(MalformedChunks, EmptyAndNullBuffers) {
@@ -248,8 +272,7 @@ TEST_F(MalformedChunks, EdgeCacheVertexPartFieldsAreChecked) {
   }
   const float bad_ranges[] = {0.0f, -1.0f, INFINITY, NAN};
   for (float range : bad_ranges) {
-    EXPECT_EQ(TryDecode(edited(part + 14, &range, 4)).code(), absl::StatusCode::kDataLoss)
-        << range;
+    EXPECT_EQ(TryDecode(edited(part + 14, &range, 4)).code(), absl::StatusCode::kDataLoss) << range;
   }
   const float bad_origin = INFINITY;
   EXPECT_EQ(TryDecode(edited(part + 2, &bad_origin, 4)).code(), absl::StatusCode::kDataLoss);
