@@ -126,34 +126,54 @@ inline int ClippedTriangleCount(const Context& c, const glm::vec3& a, const glm:
   return triangles;
 }
 
+// The crossings of sorted isovalue s on tetrahedron t as LeafEmitter places them: on which
+// corner each sits (its value is the isovalue) or 4 + its edge, its stored position, and the
+// fan's order (a quad rotated to split along its shorter diagonal). `above` and `at_iso` as in
+// LeafEmitter::Component (mc = cases[above], with crossings).
+struct ComponentCrossings {
+  int edges;
+  int where[4];
+  glm::dvec3 p[4];
+  int cycle[4];  // the crossings in the fan's order
+
+  // Out of line: the paths that need it are rare (corners at the isovalue, the data box).
+  __attribute__((noinline))
+  ComponentCrossings(const Context& c, const Node& t, int s, const MarchingTetsCase& mc,
+                     unsigned above, unsigned at_iso)
+      : edges(mc.edge_count), cycle{0, 1, 2, 3} {
+    for (int i = 0; i < edges; ++i) {
+      where[i] = CrossingPlace(mc, above, at_iso, i);
+      const int ia = mc.edge[i][0], ib = mc.edge[i][1];
+      p[i] = glm::dvec3(where[i] < 4
+                            ? CornerWorld(c, t.v[where[i]])
+                            : EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c.iso[s]));
+    }
+    if (edges == 4 && QuadSplitsAlong13(p)) std::rotate(cycle, cycle + 1, cycle + 4);
+  }
+  // Fan triangle (0, k, k + 1), as crossing indices.
+  int Corner(int k) const { return cycle[k]; }
+  // Two of its crossings on one corner leave it without an area: it is not emitted.
+  bool HasArea(int k) const {
+    const int a = where[cycle[0]], b = where[cycle[k]], d = where[cycle[k + 1]];
+    return a != b && b != d && a != d;
+  }
+};
+
 // The triangles LeafEmitter::Component appends for sorted isovalue s on leaf t, a leaf that
 // straddles the data box: the same crossings, diagonal and triangles without area dropped,
-// each triangle clipped. `above` and `at_iso` as there (mc = cases[above], with crossings).
+// each triangle clipped.
 inline int StraddlingComponentTriangles(const Context& c, const Node& t, int s,
                                         const MarchingTetsCase& mc, unsigned above,
                                         unsigned at_iso) {
-  const int edges = mc.edge_count;
-  glm::dvec3 p[4];
-  int where[4];
-  for (int i = 0; i < edges; ++i) {
-    where[i] = CrossingPlace(mc, above, at_iso, i);
-    const int ia = mc.edge[i][0], ib = mc.edge[i][1];
-    p[i] = glm::dvec3(where[i] < 4
-                          ? CornerWorld(c, t.v[where[i]])
-                          : EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c.iso[s]));
-  }
-  if (edges == 4 && QuadSplitsAlong13(p)) {
-    std::rotate(p, p + 1, p + 4);
-    std::rotate(where, where + 1, where + 4);
-  }
+  const ComponentCrossings x(c, t, s, mc, above, at_iso);
   // In the emitter's corner order (its winding flip included): the clip's crossings are
   // computed along the polygon's edges, so the reversed triangle can differ in a last bit.
   const bool flip = mc.flip[c.negative[t.cls.value]];
   int n = 0;
-  for (int k = 1; k + 1 < edges; ++k) {  // the fan (0, k, k + 1)
-    if (where[0] == where[k] || where[k] == where[k + 1] || where[0] == where[k + 1]) continue;
-    n += ClippedTriangleCount(c, glm::vec3(p[0]), glm::vec3(p[flip ? k + 1 : k]),
-                              glm::vec3(p[flip ? k : k + 1]));
+  for (int k = 1; k + 1 < x.edges; ++k) {
+    if (!x.HasArea(k)) continue;
+    const glm::dvec3 &a = x.p[x.Corner(0)], &b = x.p[x.Corner(k)], &d = x.p[x.Corner(k + 1)];
+    n += ClippedTriangleCount(c, glm::vec3(a), glm::vec3(flip ? d : b), glm::vec3(flip ? b : d));
   }
   return n;
 }

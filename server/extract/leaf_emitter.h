@@ -176,39 +176,24 @@ class LeafEmitter {
   __attribute__((noinline)) int ComponentThroughCorners(const Node& t, int s,
                                                         const MarchingTetsCase& mc, unsigned above,
                                                         unsigned at_iso, bool clip) {
-    const int edges = mc.edge_count;
-    int where[4];                 // the corner a crossing sits on, or 4 + its edge
-    int cycle[4] = {0, 1, 2, 3};  // the crossings in the fan's order
-    glm::dvec3 p[4];              // their positions as stored
-    for (int i = 0; i < edges; ++i) {
-      where[i] = CrossingPlace(mc, above, at_iso, i);
-      const int ia = mc.edge[i][0], ib = mc.edge[i][1];
-      p[i] = glm::dvec3(where[i] < 4
-                            ? CornerWorld(c_, t.v[where[i]])
-                            : EdgeCrossingWorld(c_, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c_.iso[s]));
-    }
-    if (edges == 4 && extract_internal::QuadSplitsAlong13(p))
-      std::rotate(cycle, cycle + 1, cycle + 4);
-    auto has_area = [&](int k) {  // fan triangle (0, k, k + 1)
-      const int a = where[cycle[0]], b = where[cycle[k]], d = where[cycle[k + 1]];
-      return a != b && b != d && a != d;
-    };
+    const ComponentCrossings x(c_, t, s, mc, above, at_iso);
+    const int edges = x.edges;
     // Only crossings of triangles with an area get vertices: the others would be used by none.
     unsigned used = 0;
     for (int k = 1; k + 1 < edges; ++k)
-      if (has_area(k)) used |= 1u << cycle[0] | 1u << cycle[k] | 1u << cycle[k + 1];
+      if (x.HasArea(k)) used |= 1u << x.Corner(0) | 1u << x.Corner(k) | 1u << x.Corner(k + 1);
     uint32_t made[4];
     for (int i = 0; i < edges; ++i)
       if ((used >> i) & 1)
-        made[i] = where[i] < 4 ? CornerVertex(t, where[i], s)
-                               : EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
+        made[i] = x.where[i] < 4 ? CornerVertex(t, x.where[i], s)
+                                 : EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
     uint32_t v[4];
-    for (int i = 0; i < edges; ++i) v[i] = (used >> cycle[i]) & 1 ? made[cycle[i]] : 0;
+    for (int i = 0; i < edges; ++i) v[i] = (used >> x.Corner(i)) & 1 ? made[x.Corner(i)] : 0;
     const bool flip = mc.flip[c_.negative[t.cls.value]];
     const uint8_t surface = c_.iso_surface[s];
     int emitted = 0;
     for (int k = 1; k + 1 < edges; ++k) {
-      if (!has_area(k)) continue;
+      if (!x.HasArea(k)) continue;
       const uint32_t a = v[0], b = flip ? v[k + 1] : v[k], d = flip ? v[k] : v[k + 1];
       if (clip) {
         emitted += ClipTriangle(a, b, d, surface);
