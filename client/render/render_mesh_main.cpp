@@ -5,6 +5,7 @@
 // The faces are blended in file order whatever the camera: the picture is right for the eye the
 // mesh was extracted for (isostream extract's default eye matches the default camera here when
 // the mesh fills the volume) and only approximately so from other eyes, orbits included.
+#include <absl/strings/match.h>
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_format.h>
 
@@ -27,6 +28,7 @@
 #include "client/render/headless_context.h"
 #include "client/render/image.h"
 #include "client/render/mesh_renderer.h"
+#include "shared/file_io.h"
 #include "shared/number_list.h"
 #include "shared/ply_io.h"
 
@@ -141,6 +143,14 @@ absl::StatusOr<Camera> MakeCamera(const Args& args, const OrderedMesh& mesh, flo
 absl::Status Run(const Args& args) {
   int width = 0, height = 0;
   ISOSTREAM_RETURN_IF_ERROR(ParseSize(args.size, &width, &height));
+  // PNG is all it writes (another extension would name a file holding something else), and the
+  // files it will write are checked before any work: they were found unwritable after rendering.
+  if (!absl::EndsWithIgnoreCase(args.output, ".png"))
+    return absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" +
+                                      args.output + "'");
+  for (int i = 0; i < std::max(1, args.orbit); ++i)
+    ISOSTREAM_RETURN_IF_ERROR(
+        CheckOutputPath(args.orbit > 0 ? NumberedPath(args.output, i) : args.output));
   ISOSTREAM_ASSIGN_OR_RETURN(OrderedMesh mesh, ReadPly(args.input));
   ISOSTREAM_ASSIGN_OR_RETURN(Camera camera, MakeCamera(args, mesh, float(width) / float(height)));
 

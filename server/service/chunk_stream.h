@@ -68,6 +68,8 @@ class ChunkStream : public Reactor, public StreamBase {
       core_->counters.chunks_sent.fetch_add(1);
       core_->counters.bytes_sent.fetch_add(int64_t(writing_.data().size()));
       if (writing_.last()) core_->counters.frames_sent.fetch_add(1);
+    } else if (writing_.last()) {
+      core_->counters.frames_cancelled.fetch_add(1);  // its last chunk never arrived
     }
     bool start;
     std::optional<grpc::Status> finish;

@@ -81,6 +81,9 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "volumes", "", &c->volumes));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "preload", "", &c->preload));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "token", "", &c->token));
+  // An empty one (a template's placeholder, say) would serve without a token, silently.
+  if (j.contains("token") && c->token.empty())
+    return absl::InvalidArgumentError("'token' is empty; leave it out to serve without a token");
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "log_level", "", &c->log_level));
   ISOSTREAM_RETURN_IF_ERROR(Get(j, "shutdown_grace_ms", "", &c->shutdown_grace_ms));
   if (j.contains("tls")) {

@@ -499,6 +499,30 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
   }
 }
 
+// Started with SIGHUP ignored (nohup), it keeps serving through one: a blocked signal is queued
+// for sigwait even when ignored, so waiting for SIGHUP too stopped it.
+TEST(DaemonStart, KeepsServingThroughAnIgnoredSighup) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  struct sigaction ignore {
+  }, previous{};
+  ignore.sa_handler = SIG_IGN;
+  sigemptyset(&ignore.sa_mask);
+  ASSERT_EQ(sigaction(SIGHUP, &ignore, &previous), 0);  // inherited through fork and exec
+  const bool started = daemon.Start({"--no-cache"}, dir.path() + "/daemon.log");
+  sigaction(SIGHUP, &previous, nullptr);
+  ASSERT_TRUE(started);
+  ASSERT_EQ(kill(daemon.pid(), SIGHUP), 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  const auto frame = (*c)->Fetch(MakeView("sphere:17", 1, 0.01, glm::dvec3(2, 2, 2)));
+  EXPECT_TRUE(frame.ok()) << frame.status();
+  EXPECT_EQ(daemon.Stop(SIGTERM), 0);
+}
+
 // A daemon that cannot serve as asked stops at start, exit 1, saying why: a port another
 // daemon holds (gRPC's default SO_REUSEPORT would have let both listen and split the
 // clients between them), and TLS files that hold no PEM (gRPC blames the port for those).
@@ -537,8 +561,7 @@ TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
   ASSERT_TRUE(MakeTestCertificate(other, &other_key, &other_cert));
   r = RunCommand(base + "--tls-cert " + cert + " --tls-key " + other_key);
   EXPECT_EQ(r.code, 1) << r.output;
-  EXPECT_NE(r.output.find("the TLS certificate and key do not belong together"),
-            std::string::npos)
+  EXPECT_NE(r.output.find("the TLS certificate and key do not belong together"), std::string::npos)
       << r.output;
 }
 

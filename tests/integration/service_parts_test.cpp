@@ -143,6 +143,7 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
             std::string::npos);
   EXPECT_NE(message("{\"token\": \"caf\u00e9\"}").find("printable ASCII"), std::string::npos);
   EXPECT_EQ(message(R"({"token": "a b"})"), "");
+  EXPECT_NE(message(R"({"token": ""})").find("'token' is empty"), std::string::npos);
   // Whole numbers written as JSON floats are whole numbers.
   DaemonConfig c;
   ASSERT_TRUE(LoadText(R"({"limits": {"deadline_ms": 1e3, "max_sessions": 3.0}})", &c).ok());

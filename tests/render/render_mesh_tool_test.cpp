@@ -80,8 +80,9 @@ TEST_F(RenderMeshTool, BadInputsExitNonZeroWithAClearMessage) {
   const std::string png = Temp("never.png");
   std::filesystem::remove(png);
   const std::string corrupt = Temp("corrupt.ply");
-  ASSERT_TRUE(WriteFileBytes(corrupt, "ply\nformat binary_little_endian 1.0\nelement vertex "
-                                      "99999999999\nend_header\n")
+  ASSERT_TRUE(WriteFileBytes(corrupt,
+                             "ply\nformat binary_little_endian 1.0\nelement vertex "
+                             "99999999999\nend_header\n")
                   .ok());
   struct Case {
     std::string args;
@@ -102,7 +103,11 @@ TEST_F(RenderMeshTool, BadInputsExitNonZeroWithAClearMessage) {
       {corrupt + " -o " + png, "declares 99999999999 items"},
       {"/dev/zero -o " + png, "regular file"},
       {ply_ + " -o /no/such/dir/x.png", "/no/such/dir"},
+      // Before any rendering: a name that is not .png, and an orbit frame it cannot write.
+      {ply_ + " -o " + Temp("x.jpg"), "give a .png path"},
+      {ply_ + " -o " + Temp("orbit.png") + " --orbit 3", "orbit_001.png is a directory"},
   };
+  std::filesystem::create_directory(Temp("orbit_001.png"));
   for (const Case& c : cases) {
     const auto r = RenderMesh(c.args);
     EXPECT_GT(r.code, 0) << c.args << "\n" << r.output;  // an exit status, not a signal
@@ -113,6 +118,8 @@ TEST_F(RenderMeshTool, BadInputsExitNonZeroWithAClearMessage) {
     }
   }
   EXPECT_FALSE(std::filesystem::exists(png));
+  EXPECT_FALSE(std::filesystem::exists(Temp("x.jpg")));
+  EXPECT_FALSE(std::filesystem::exists(Temp("orbit_000.png")));
 }
 
 }  // namespace
