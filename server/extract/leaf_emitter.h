@@ -351,8 +351,9 @@ class LeafEmitter {
   }
 
   // A corner vertex's gradient where its central differences vanish (inside a terrace): the
-  // differences to its 26 neighbours at distances 1, 2, 4, ... until some differ. From the
-  // corner alone, so that every edge through it, in every view, gives it the same normal.
+  // differences to its 26 neighbours at distances 1, 2, 4, ... until some differ (then one-sided
+  // ones, where they cancel at every distance). From the corner alone, so that every edge
+  // through it, in every view, gives it the same normal.
   template <typename T>
   glm::vec<3, T> CornerGradient(const glm::ivec3& p) const {
     const int last = c_.n - 1;
@@ -368,6 +369,17 @@ class LeafEmitter {
             const glm::vec<3, T> u(o);
             g += (F<T>(c_.ValueOffset(q)) - fp) / glm::dot(u, u) * u;
           }
+      if (glm::dot(g, g) != 0) return g;
+    }
+    // Symmetric about the corner at every distance (the apex of |x| + |y| - |z|): the
+    // differences to its forward neighbours, else its backward ones.
+    for (const int side : {1, -1}) {
+      glm::vec<3, T> g(0);
+      for (int a = 0; a < 3; ++a) {
+        glm::ivec3 q = p;
+        q[a] = std::clamp(q[a] + side, 0, last);
+        g[a] = T(side) * (F<T>(c_.ValueOffset(q)) - fp);
+      }
       if (glm::dot(g, g) != 0) return g;
     }
     return glm::vec<3, T>(0);
