@@ -268,8 +268,22 @@ class BodyReader {
     const auto parsed = std::from_chars(p_, end_, *value);
     if (parsed.ec != std::errc()) return false;
     p_ = parsed.ptr;
+    // Values are separated by white space: "1-0" is malformed, not 1 and -0.
+    return p_ == end_ || IsSpace(*p_);
+  }
+
+ public:
+  // Ascii: whether only white space is left after the last element (text after it was a
+  // miscounted header or a damaged file, read as if the mesh were whole).
+  bool OnlySpaceLeft() const {
+    if (binary_) return true;
+    for (const char* q = p_; q < end_; ++q)
+      if (!IsSpace(*q)) return false;
     return true;
   }
+
+ private:
+  static bool IsSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n'; }
 
   const char* p_;
   const char* end_;
@@ -519,6 +533,8 @@ absl::StatusOr<OrderedMesh> ParsePly(std::string_view std_bytes) {
       ISOSTREAM_RETURN_IF_ERROR(SkipElement(element, &reader));
     }
   }
+  if (!reader.OnlySpaceLeft())
+    return absl::DataLossError("text follows the last element the header declares");
   return mesh;
 }
 

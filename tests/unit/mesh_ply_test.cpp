@@ -227,10 +227,16 @@ TEST(MeshPly, BadContentIsRejected) {
       "property float z\nelement face 1\nproperty list uchar uint vertex_indices\n"
       "property uchar surface\nend_header\n0 0 0\n1 0 0\n0 1 0\n";
   const std::pair<std::string, const char*> cases[] = {
-      {"3 0 1 3 0\n", "vertex index 3"},     {"3 0 1 -1 0\n", "vertex index -1"},
-      {"3 0 1 1.5 0\n", "vertex index 1.5"}, {"4 0 1 2 2 0\n", "only triangles"},
-      {"3 0 1 2 16\n", "surface 16"},        {"3 0 1 2\n", "ends early"},
+      {"3 0 1 3 0\n", "vertex index 3"},
+      {"3 0 1 -1 0\n", "vertex index -1"},
+      {"3 0 1 1.5 0\n", "vertex index 1.5"},
+      {"4 0 1 2 2 0\n", "only triangles"},
+      {"3 0 1 2 16\n", "surface 16"},
+      {"3 0 1 2\n", "ends early"},
       {"3 0 1 x 0\n", "malformed"},
+      // Values run together, and text after the last face (both were read as a whole mesh).
+      {"3 0 1 2-0\n", "malformed"},
+      {"3 0 1 2 0\n7 7\n", "text follows"},
   };
   for (const auto& [faces, reason] : cases) {
     const absl::StatusOr<OrderedMesh> mesh = ParsePly(header + faces);
