@@ -87,14 +87,16 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
   const RetainedCut* same_mesh = retained ? retained->Find(volume, request) : nullptr;
   if (view.progressive() && same_mesh == nullptr) {
     const int64_t coarse = settings_.coarse_triangles;
-    bool want_coarse;
-    if (request.budget > 0) {
-      want_coarse = request.budget > coarse;
-    } else {
-      // A count that stops past the coarse budget is cheap, and avoids sending a "coarse"
-      // frame finer than the requested one.
+    // A count that stops past the coarse budget is cheap, and avoids sending a "coarse" frame
+    // that is the requested one (or finer): for an eps, at that eps; for a budget, at eps 0
+    // (the whole mesh fits it). A budget of at most twice the coarse one gets no coarse frame:
+    // its own frame is as quick, and can be the same mesh (a budget of 20001 drew the 20000
+    // triangles of the coarse frame twice).
+    const bool budget = request.budget > 0;
+    bool want_coarse = !budget || request.budget > 2 * coarse;
+    if (want_coarse) {
       auto n = CountTriangles(*volume.prepared.hierarchy, volume.prepared.grid_to_world, request,
-                              request.eps, coarse + 1);
+                              budget ? 0.0 : request.eps, coarse + 1);
       want_coarse = !n.ok() || *n > coarse;
     }
     if (want_coarse) {

@@ -78,8 +78,8 @@ class FrameProducer {
       : settings_(settings), encoders_(encoders), counters_(counters) {}
 
   // Streams the frame(s) answering `view` into `sink` as `generation`: with view.progressive
-  // a coarse frame first (skipped when the requested frame is no bigger), then the requested
-  // one. Blocks until every chunk is queued on the sink or the work stops. `cancel` may be set
+  // a coarse frame first (skipped when the requested frame is no bigger, or its budget at most
+  // twice the coarse one), then the requested one. Blocks until every chunk is queued on the sink or the work stops. `cancel` may be set
   // by another thread at any time (a newer view, the client leaving); the producer also sets it
   // itself to stop early. Returns OK, CANCELLED, DEADLINE_EXCEEDED (limits.deadline_ms),
   // RESOURCE_EXHAUSTED (a frame over max_triangles) or the extractor's error.

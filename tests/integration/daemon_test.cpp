@@ -134,7 +134,6 @@ TEST_F(Daemon, BudgetSearchRunsOnceAndLaterViewsReuseItsEps) {
   }
 }
 
-
 // Within a session, a refined frame is kept and later views of its mesh (same volume,
 // isovalues, eps, normals) are re-ordered from it, not extracted again: the frame says so, and
 // equals a direct extraction for its view. A progressive request then skips its coarse frame;
@@ -358,6 +357,34 @@ TEST_F(Daemon, NewViewCancelsOldFrameAndCoarseArrivesBeforeRefined) {
   EXPECT_GE(after.frames_cancelled(), before->frames_cancelled() + 1);
 }
 
+// A progressive budget request whose frame is no bigger than the coarse one gets one frame, the
+// refined one: the whole mesh within the coarse budget, or a budget at most twice it (a budget
+// of 20001 drew the same 20000 triangles twice, as coarse and as refined).
+TEST_F(Daemon, ProgressiveBudgetsGetNoCoarseCopyOfTheirFrame) {
+  auto c = Connect();
+  for (const auto& [volume, budget] : std::vector<std::pair<std::string, int64_t>>{
+           {"sphere:33", 200000}, {"buckyball:65", 20001}}) {
+    auto session = c->OpenSession();
+    ASSERT_TRUE(session.ok());
+    pb::ViewRequest v = MakeView(volume, 1, 0.0, glm::dvec3(3, 2, 1));
+    v.set_triangle_budget(budget);
+    v.set_progressive(true);
+    ASSERT_TRUE((*session)->Send(v).ok());
+    ASSERT_TRUE((*session)->CloseSend().ok());
+    net::FrameAssembler assembler;
+    pb::FrameChunk chunk;
+    int coarse_chunks = 0, frames = 0;
+    while ((*session)->Read(&chunk)) {
+      coarse_chunks += chunk.coarse();
+      ASSERT_TRUE(assembler.Add(chunk).ok());
+      if (assembler.complete()) ++frames, assembler.Take();
+    }
+    EXPECT_TRUE((*session)->Finish().ok());
+    EXPECT_EQ(coarse_chunks, 0) << volume;
+    EXPECT_EQ(frames, 1) << volume;
+  }
+}
+
 // Views replaced while their volume is still being prepared (the frame never starts) count as
 // cancelled frames too, as the proto says; they were not counted.
 TEST_F(Daemon, ViewsSupersededWhileTheVolumePreparesCountAsCancelled) {
@@ -567,7 +594,10 @@ std::pair<grpc::Status, int> RawCall(const std::string& address, const std::stri
 // end a Session with OK and no frame (it takes the failed parse for the client's half-close)
 // and answer the others UNIMPLEMENTED with no message.
 TEST_F(Daemon, RequestBytesThatDoNotParseAreInvalidArgument) {
-  const std::string garbage("\x0a\x10" "abc", 5);
+  const std::string garbage(
+      "\x0a\x10"
+      "abc",
+      5);
   for (const auto& [method, type] : std::vector<std::pair<std::string, std::string>>{
            {"/isostream.v1.Isostream/Session", "ViewRequest"},
            {"/isostream.v1.Isostream/Extract", "ViewRequest"},
@@ -602,8 +632,7 @@ TEST_F(Daemon, RequestBytesThatDoNotParseAreInvalidArgument) {
                                "/isostream.v1.Isostream/GetVolumeInfo"}) {
       const auto [status, messages] = RawCall(daemon_->address(), method, bytes);
       const auto code = status.error_code();
-      EXPECT_TRUE(code == grpc::StatusCode::INVALID_ARGUMENT ||
-                  code == grpc::StatusCode::NOT_FOUND)
+      EXPECT_TRUE(code == grpc::StatusCode::INVALID_ARGUMENT || code == grpc::StatusCode::NOT_FOUND)
           << method << ": " << code << " " << status.error_message();
       EXPECT_EQ(messages, 0) << method;
     }
