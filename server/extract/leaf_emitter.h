@@ -159,13 +159,12 @@ class LeafEmitter {
     return count;
   }
 
-  // A component of a leaf that straddles the data box, clipped there. One whose triangles all
-  // fall outside makes no vertices (they would be used by nothing). Out of line: rare.
+  // A component of a leaf that straddles the data box, clipped there (the vertices of parts
+  // clipped away are dropped with the subtree's unused ones). Out of line: rare.
   __attribute__((noinline)) int StraddlingComponent(const Node& t, int s,
                                                     const MarchingTetsCase& mc, unsigned above,
                                                     unsigned at_iso) {
-    const int n = StraddlingComponentTriangles(c_, t, s, mc, above, at_iso);
-    if (!kEmit || n == 0) return n;
+    if constexpr (!kEmit) return StraddlingComponentTriangles(c_, t, s, mc, above, at_iso);
     return ComponentThroughCorners(t, s, mc, above, at_iso, true);
   }
 

@@ -114,7 +114,10 @@ inline void IsoRange(const Context& c, float lo, float hi, int* first, int* last
 }
 
 // For a leaf, [*first, *last) are the sorted isovalues that cross it.
-inline Decision Decide(const Context& c, const Node& t, int* first, int* last) {
+// Always inlined, as Bisect: GCC's choice flipped with unrelated changes elsewhere (a call
+// here cost ~2.5%).
+__attribute__((always_inline)) inline Decision Decide(const Context& c, const Node& t, int* first,
+                                                      int* last) {
   if (c.clip) {
     const glm::ivec3 v[4] = {Unpack(t.v[0]), Unpack(t.v[1]), Unpack(t.v[2]), Unpack(t.v[3])};
     for (int a = 0; a < 3; ++a) {
