@@ -1,14 +1,38 @@
 #include "client/render/image.h"
 
+#include <absl/strings/match.h>
 #include <absl/strings/str_cat.h>
 #include <png.h>
 
+#include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 
 #include "shared/file_io.h"
 
 namespace isostream::render {
+
+std::string NumberedPngPath(const std::string& path, int index) {
+  const size_t slash = path.find_last_of('/');
+  const size_t dot = path.find_last_of('.');
+  const bool has_extension =
+      dot != std::string::npos && (slash == std::string::npos || dot > slash);
+  const std::string stem = has_extension ? path.substr(0, dot) : path;
+  const std::string extension = has_extension ? path.substr(dot) : ".png";
+  char number[16];
+  std::snprintf(number, sizeof(number), "_%03d", index);
+  return stem + number + extension;
+}
+
+absl::Status CheckPngOutputs(const std::string& path, int orbit) {
+  if (!absl::EndsWithIgnoreCase(path, ".png"))
+    return absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" + path +
+                                      "'");
+  for (int i = 0; i < std::max(1, orbit); ++i)
+    ISOSTREAM_RETURN_IF_ERROR(CheckOutputPath(orbit > 0 ? NumberedPngPath(path, i) : path));
+  return absl::OkStatus();
+}
 namespace {
 
 // Larger images are refused before allocating, so that a small malicious header cannot make

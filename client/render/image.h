@@ -27,6 +27,16 @@ absl::Status EncodePng(const Image& image, std::string* out);
 // EncodePng to the file at `path` (created or truncated); I/O failures name the path.
 absl::Status WritePng(const Image& image, const std::string& path);
 
+// The file an image command writes for -o `path` and view `index` of an orbit: the number
+// goes before the extension (out.png -> out_007.png), so an orbit's frames sort in order.
+std::string NumberedPngPath(const std::string& path, int index);
+
+// Checks, before any work, that -o `path` names PNG files the command can write: the path
+// itself, or with an orbit of `orbit` views (0: none) each numbered file. InvalidArgument for
+// a path not ending in .png (another extension would name a file holding something else);
+// CheckOutputPath's status for a file it could not write.
+absl::Status CheckPngOutputs(const std::string& path, int orbit);
+
 // Decodes PNG bytes of any colour type and bit depth into 8-bit RGBA (grey is replicated, a
 // missing alpha channel becomes 255). InvalidArgument, with libpng's reason, for bytes that are
 // not a complete, valid PNG: wrong signature, bad CRC, truncated data.

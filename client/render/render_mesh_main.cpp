@@ -5,9 +5,7 @@
 // The faces are blended in file order whatever the camera: the picture is right for the eye the
 // mesh was extracted for (isostream extract's default eye matches the default camera here when
 // the mesh fills the volume) and only approximately so from other eyes, orbits included.
-#include <absl/strings/match.h>
 #include <absl/strings/str_cat.h>
-#include <absl/strings/str_format.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -28,7 +26,6 @@
 #include "client/render/headless_context.h"
 #include "client/render/image.h"
 #include "client/render/mesh_renderer.h"
-#include "shared/file_io.h"
 #include "shared/number_list.h"
 #include "shared/ply_io.h"
 
@@ -63,17 +60,6 @@ absl::StatusOr<glm::vec3> ParseVec3(const std::string& text, const char* what) {
 
 absl::Status ParseSize(const std::string& text, int* width, int* height) {
   return ParseImageSize(text, "--size", 16384, width, height);
-}
-
-// out.png -> out_007.png, so an orbit's frames sort in order.
-std::string NumberedPath(const std::string& path, int index) {
-  const size_t slash = path.find_last_of('/');
-  const size_t dot = path.find_last_of('.');
-  const bool has_extension =
-      dot != std::string::npos && (slash == std::string::npos || dot > slash);
-  const std::string stem = has_extension ? path.substr(0, dot) : path;
-  const std::string extension = has_extension ? path.substr(dot) : ".png";
-  return absl::StrFormat("%s_%03d%s", stem, index, extension);
 }
 
 absl::StatusOr<Camera> MakeCamera(const Args& args, const OrderedMesh& mesh, float aspect) {
@@ -143,14 +129,8 @@ absl::StatusOr<Camera> MakeCamera(const Args& args, const OrderedMesh& mesh, flo
 absl::Status Run(const Args& args) {
   int width = 0, height = 0;
   ISOSTREAM_RETURN_IF_ERROR(ParseSize(args.size, &width, &height));
-  // PNG is all it writes (another extension would name a file holding something else), and the
-  // files it will write are checked before any work: they were found unwritable after rendering.
-  if (!absl::EndsWithIgnoreCase(args.output, ".png"))
-    return absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" +
-                                      args.output + "'");
-  for (int i = 0; i < std::max(1, args.orbit); ++i)
-    ISOSTREAM_RETURN_IF_ERROR(
-        CheckOutputPath(args.orbit > 0 ? NumberedPath(args.output, i) : args.output));
+  // Before any work: unwritable files were found after rendering.
+  ISOSTREAM_RETURN_IF_ERROR(CheckPngOutputs(args.output, args.orbit));
   ISOSTREAM_ASSIGN_OR_RETURN(OrderedMesh mesh, ReadPly(args.input));
   ISOSTREAM_ASSIGN_OR_RETURN(Camera camera, MakeCamera(args, mesh, float(width) / float(height)));
 
@@ -178,7 +158,7 @@ absl::Status Run(const Args& args) {
   for (size_t i = 0; i < cameras.size(); ++i) {
     ISOSTREAM_RETURN_IF_ERROR(renderer->Render(cameras[i]));
     ISOSTREAM_ASSIGN_OR_RETURN(Image image, context->ReadPixels());
-    const std::string path = args.orbit > 0 ? NumberedPath(args.output, int(i)) : args.output;
+    const std::string path = args.orbit > 0 ? NumberedPngPath(args.output, int(i)) : args.output;
     ISOSTREAM_RETURN_IF_ERROR(WritePng(image, path));
   }
   const double ms =

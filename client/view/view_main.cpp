@@ -21,7 +21,6 @@
 #include <thread>
 #include <vector>
 
-#include "absl/strings/match.h"
 #include "client/net/session_client.h"
 #include "client/render/camera.h"
 #include "client/render/headless_context.h"
@@ -61,15 +60,6 @@ struct Args {
 
 absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what) {
   return ParseNumberList(text, what);
-}
-
-std::string NumberedPath(const std::string& path, int index) {
-  char suffix[16];
-  std::snprintf(suffix, sizeof(suffix), "_%03d", index);
-  const size_t dot = path.find_last_of('.');
-  const size_t slash = path.find_last_of('/');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return path + suffix;
-  return path.substr(0, dot) + suffix + path.substr(dot);
 }
 
 // Cancels a session that has heard nothing from the server for `limit` (0: never): a Session
@@ -195,15 +185,9 @@ int Run(const Args& args) {
   } else if (args.output.empty()) {
     return Fail(absl::InvalidArgumentError("give -o frame.png (or --window)"));
   }
-  // PNG is all it writes: another extension would name a file holding something else.
-  const std::string& out = args.output;
-  if (!out.empty() && !absl::EndsWithIgnoreCase(out, ".png"))
-    return Fail(
-        absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" + out + "'"));
-  // The files it will write: with --orbit, name_000.png, ... (not the name itself).
-  for (int i = 0; !out.empty() && i < std::max(1, args.orbit); ++i)
-    if (const absl::Status writable =
-            CheckOutputPath(args.orbit > 0 ? NumberedPath(out, i) : out);
+  // The files it will write (with --orbit, name_000.png, ...), before any work.
+  if (!args.output.empty())
+    if (const absl::Status writable = render::CheckPngOutputs(args.output, args.orbit);
         !writable.ok())
       return Fail(absl::InvalidArgumentError(writable.message()));  // an argument: exit 2
   int width = 0, height = 0;
@@ -362,7 +346,8 @@ int Run(const Args& args) {
     if (!drawn.ok()) return Fail(drawn);
     auto image = (*context)->ReadPixels();
     if (!image.ok()) return Fail(image.status());
-    const std::string path = args.orbit > 0 ? NumberedPath(args.output, int(i)) : args.output;
+    const std::string path =
+        args.orbit > 0 ? render::NumberedPngPath(args.output, int(i)) : args.output;
     const absl::Status written = render::WritePng(*image, path);
     if (!written.ok()) return Fail(written);
     std::printf(
