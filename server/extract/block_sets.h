@@ -4,6 +4,8 @@
 // SSE2 where available; the scalar forms define the result and are tested against it.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 
 #include "server/hierarchy/block_tables.h"
@@ -58,14 +60,30 @@ inline unsigned AboveCorners(const float* f, float iso) {
 #endif
 }
 
-// Corners whose value equals iso: their crossings sit on the corner itself.
-inline unsigned CornersAtIso(const float* f, float iso) {
-#ifdef __SSE2__
-  return unsigned(_mm_movemask_ps(_mm_cmpeq_ps(_mm_loadu_ps(f), _mm_set1_ps(iso))));
-#else
+// Corners whose value is within tau times the largest distance of a corner's value from iso,
+// doubled: a superset of those a crossing can round onto (Context::snap_tau bounds the parameter
+// of a crossing whose stored position is one of its edge's ends, and a crossed edge's values
+// differ by at most that doubled distance). A superset is harmless (such components take the
+// exact path); a missed corner would not be.
+inline unsigned CornersNearIsoScalar(const float* f, float iso, float tau) {
+  float dist[4], farthest = 0;
+  for (int i = 0; i < 4; ++i) farthest = std::max(farthest, dist[i] = std::abs(f[i] - iso));
+  const float band = 2 * farthest * tau;
   unsigned m = 0;
-  for (int i = 0; i < 4; ++i) m |= unsigned(f[i] == iso) << i;
+  for (int i = 0; i < 4; ++i) m |= unsigned(dist[i] <= band) << i;
   return m;
+}
+
+inline unsigned CornersNearIso(const float* f, float iso, float tau) {
+#ifdef __SSE2__
+  const __m128 dist =
+      _mm_andnot_ps(_mm_set1_ps(-0.0f), _mm_sub_ps(_mm_loadu_ps(f), _mm_set1_ps(iso)));
+  __m128 far = _mm_max_ps(dist, _mm_shuffle_ps(dist, dist, _MM_SHUFFLE(2, 3, 0, 1)));
+  far = _mm_max_ps(far, _mm_shuffle_ps(far, far, _MM_SHUFFLE(1, 0, 3, 2)));
+  const __m128 band = _mm_mul_ps(_mm_add_ps(far, far), _mm_set1_ps(tau));
+  return unsigned(_mm_movemask_ps(_mm_cmple_ps(dist, band)));
+#else
+  return CornersNearIsoScalar(f, iso, tau);
 #endif
 }
 

@@ -41,10 +41,13 @@ inline int LeafTriangles(const Context& c, const Node& t) {
   for (int s = first; s < last; ++s) {
     const unsigned above = AboveCorners(t.f, c.iso[s]);
     const MarchingTetsCase& mc = (*c.cases)[above];
-    const unsigned at_iso = CornersAtIso(t.f, c.iso[s]) & above;
-    n += straddles && mc.edge_count != 0
-             ? StraddlingComponentTriangles(c, t, s, mc, above, at_iso)
-             : mc.triangles[at_iso];
+    if (mc.edge_count == 0) continue;
+    if (straddles)
+      n += StraddlingComponentTriangles(c, t, s, mc);
+    else if (CornersNearIso(t.f, c.iso[s], c.snap_tau) != 0)
+      n += ComponentCrossings(c, t, s, mc).Triangles();
+    else
+      n += mc.edge_count - 2;
   }
   return n;
 }

@@ -42,6 +42,24 @@ inline glm::vec3 CrossingWorld(const Context& c, const glm::ivec3& a, const glm:
   return c.world_origin + c.world_spacing * (glm::vec3(a) + t * glm::vec3(d));
 }
 
+// Context::snap_tau. A crossing at parameter t on an edge from grid point a along d is stored as
+// o + s (a + t d) in single precision, and its end a as o + s a. On an axis x with |d_x| >= 1
+// (every edge has one), with coordinates in [0, last], the roundings between the two move
+// their difference s t d_x by at most 2^-24 (5 last |s| + 2 |o|), so both round alike only if
+// t <= 2^-24 (5 last + 2 |o| / |s|) (plus a little for t's own rounding); for the far end b,
+// 1 - t <= 2^-24 (7 last + 2 |o| / |s| + 1). The bound below adds a margin for the float
+// arithmetic of CornersNearIso. An origin far from the grid, or a spacing that underflowed,
+// makes it large: more components take the exact path, which is right, only slower.
+inline float SnapTau(const glm::vec3& origin, const glm::vec3& spacing, int last) {
+  double tau = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double ratio = double(std::abs(origin[a])) / double(std::abs(spacing[a]));
+    const double bound = 9.0 * last + 3.0 * (std::isfinite(ratio) ? ratio : 1e30) + 2.0;
+    tau = std::max(tau, std::ldexp(bound, -24));
+  }
+  return float(std::min(tau, 1e30));
+}
+
 // The stored position of the crossing on edge (va, vb).
 inline glm::vec3 EdgeCrossingWorld(const Context& c, PackedPoint va, PackedPoint vb, float fa,
                                    float fb, float iso) {
@@ -126,27 +144,37 @@ inline int ClippedTriangleCount(const Context& c, const glm::vec3& a, const glm:
   return triangles;
 }
 
+// The corner (ia or ib) of leaf t whose stored position the crossing's stored position q is,
+// or -1. The edge's lexicographically smaller end is tested first, so every tetrahedron around
+// the edge decides alike even where the world transform maps both ends to one point.
+inline int SnappedCorner(const Context& c, const Node& t, int ia, int ib, const glm::vec3& q) {
+  const glm::ivec3 d = Unpack(t.v[ib]) - Unpack(t.v[ia]);
+  if ((d.x != 0 ? d.x : d.y != 0 ? d.y : d.z) < 0) std::swap(ia, ib);
+  if (q == CornerWorld(c, t.v[ia])) return ia;
+  if (q == CornerWorld(c, t.v[ib])) return ib;
+  return -1;
+}
+
 // The crossings of sorted isovalue s on tetrahedron t as LeafEmitter places them: on which
-// corner each sits (its value is the isovalue) or 4 + its edge, its stored position, and the
-// fan's order (a quad rotated to split along its shorter diagonal). `above` and `at_iso` as in
-// LeafEmitter::Component (mc = cases[above], with crossings).
+// corner each sits (its stored position rounds onto the corner's, as it does when the corner's
+// value is the isovalue) or 4 + its edge, its stored position, and the fan's order (a quad
+// rotated to split along its shorter diagonal). mc is the case of t for s, with crossings.
 struct ComponentCrossings {
   int edges;
   int where[4];
   glm::dvec3 p[4];
   int cycle[4];  // the crossings in the fan's order
 
-  // Out of line: the paths that need it are rare (corners at the isovalue, the data box).
+  // Out of line: the paths that need it are rare (corners near the isovalue, the data box).
   __attribute__((noinline))
-  ComponentCrossings(const Context& c, const Node& t, int s, const MarchingTetsCase& mc,
-                     unsigned above, unsigned at_iso)
+  ComponentCrossings(const Context& c, const Node& t, int s, const MarchingTetsCase& mc)
       : edges(mc.edge_count), cycle{0, 1, 2, 3} {
     for (int i = 0; i < edges; ++i) {
-      where[i] = CrossingPlace(mc, above, at_iso, i);
       const int ia = mc.edge[i][0], ib = mc.edge[i][1];
-      p[i] = glm::dvec3(where[i] < 4
-                            ? CornerWorld(c, t.v[where[i]])
-                            : EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c.iso[s]));
+      const glm::vec3 q = EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c.iso[s]);
+      const int corner = SnappedCorner(c, t, ia, ib, q);
+      where[i] = corner >= 0 ? corner : 4 + i;
+      p[i] = glm::dvec3(q);
     }
     if (edges == 4 && QuadSplitsAlong13(p)) std::rotate(cycle, cycle + 1, cycle + 4);
   }
@@ -157,15 +185,20 @@ struct ComponentCrossings {
     const int a = where[cycle[0]], b = where[cycle[k]], d = where[cycle[k + 1]];
     return a != b && b != d && a != d;
   }
+  // The triangles with an area: what the emitter appends for a leaf inside the data box.
+  int Triangles() const {
+    int n = 0;
+    for (int k = 1; k + 1 < edges; ++k) n += HasArea(k);
+    return n;
+  }
 };
 
 // The triangles LeafEmitter::Component appends for sorted isovalue s on leaf t, a leaf that
 // straddles the data box: the same crossings, diagonal and triangles without area dropped,
 // each triangle clipped.
 inline int StraddlingComponentTriangles(const Context& c, const Node& t, int s,
-                                        const MarchingTetsCase& mc, unsigned above,
-                                        unsigned at_iso) {
-  const ComponentCrossings x(c, t, s, mc, above, at_iso);
+                                        const MarchingTetsCase& mc) {
+  const ComponentCrossings x(c, t, s, mc);
   // In the emitter's corner order (its winding flip included): the clip's crossings are
   // computed along the polygon's edges, so the reversed triangle can differ in a last bit.
   const bool flip = mc.flip[c.negative[t.cls.value]];

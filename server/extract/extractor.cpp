@@ -109,6 +109,7 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   c.world_origin = glm::vec3(xf.origin);
   c.world_spacing = glm::vec3(xf.spacing);
   c.inv_spacing = glm::vec3(1.0 / xf.spacing);
+  c.snap_tau = extract_internal::SnapTau(c.world_origin, c.world_spacing, c.n - 1);
   c.tables = &ReferenceTets::Get();
   c.blocks = &BlockTables::Get();
   c.block_level = r.blocks ? 3 * c.k - kBlockDepth : -1;

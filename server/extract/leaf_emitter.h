@@ -132,11 +132,12 @@ class LeafEmitter {
     const unsigned above = AboveCorners(t.f, iso);
     const MarchingTetsCase& mc = (*c_.cases)[above];
     if (mc.edge_count == 0) return 0;
-    const unsigned at_iso = CornersAtIso(t.f, iso) & above;
-    if (c_.clip && !InsideDataBox(c_, t)) return StraddlingComponent(t, s, mc, above, at_iso);
-    if (!kEmit) return mc.triangles[at_iso];
-    if (at_iso != 0) return ComponentThroughCorners(t, s, mc, above, at_iso, false);
+    if (c_.clip && !InsideDataBox(c_, t)) return StraddlingComponent(t, s, mc);
+    // A crossing that may round onto a corner (its value at or next to the isovalue) is placed
+    // exactly, out of line.
+    if (CornersNearIso(t.f, iso, c_.snap_tau) != 0) return ComponentNearCorners(t, s, mc);
     const int count = mc.edge_count - 2;
+    if (!kEmit) return count;
     uint32_t v[4];
     const int edges = mc.edge_count;  // a local: the stores below could alias the table
     for (int i = 0; i < edges; ++i) v[i] = EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
@@ -162,20 +163,26 @@ class LeafEmitter {
   // A component of a leaf that straddles the data box, clipped there (the vertices of parts
   // clipped away are dropped with the subtree's unused ones). Out of line: rare.
   __attribute__((noinline)) int StraddlingComponent(const Node& t, int s,
-                                                    const MarchingTetsCase& mc, unsigned above,
-                                                    unsigned at_iso) {
-    if constexpr (!kEmit) return StraddlingComponentTriangles(c_, t, s, mc, above, at_iso);
-    return ComponentThroughCorners(t, s, mc, above, at_iso, true);
+                                                    const MarchingTetsCase& mc) {
+    if constexpr (!kEmit) return StraddlingComponentTriangles(c_, t, s, mc);
+    return ComponentThroughCorners(t, s, mc, true);
   }
 
-  // A component with crossings on corners whose value is the isovalue (flat or integer data):
-  // the crossings of one such corner are one vertex, named by the corner, and a triangle left
-  // without an area is not emitted (most of a terrace's triangles had none). Also the path of
-  // straddling leaves (`clip`), with or without such corners. Out of line: rare.
-  __attribute__((noinline)) int ComponentThroughCorners(const Node& t, int s,
-                                                        const MarchingTetsCase& mc, unsigned above,
-                                                        unsigned at_iso, bool clip) {
-    const ComponentCrossings x(c_, t, s, mc, above, at_iso);
+  // A component with a corner near the isovalue. Out of line: rare.
+  __attribute__((noinline)) int ComponentNearCorners(const Node& t, int s,
+                                                     const MarchingTetsCase& mc) {
+    if constexpr (!kEmit) return ComponentCrossings(c_, t, s, mc).Triangles();
+    return ComponentThroughCorners(t, s, mc, false);
+  }
+
+  // A component whose crossings may round onto corners (a corner's value is the isovalue, as in
+  // flat or integer data, or within a rounding of it): the crossings stored on one corner are
+  // one vertex, named by the corner, and a triangle left without an area is not emitted (most of
+  // a terrace's triangles had none; at an isovalue one float step off integer data, 64% had two
+  // corners in one place). Also the path of straddling leaves (`clip`). Without such crossings
+  // it emits what Component does, vertex for vertex.
+  int ComponentThroughCorners(const Node& t, int s, const MarchingTetsCase& mc, bool clip) {
+    const ComponentCrossings x(c_, t, s, mc);
     const int edges = x.edges;
     // Only crossings of triangles with an area get vertices: the others would be used by none.
     unsigned used = 0;
@@ -227,7 +234,7 @@ class LeafEmitter {
     return found != EdgeVertexTable::kMissing ? found : NewVertex(t, ia, ib, s, mid2, key);
   }
 
-  // The crossings on corner `corner` (its value is the isovalue) of surface s: one vertex for
+  // The crossings of surface s stored on corner `corner` (ComponentCrossings): one vertex for
   // every edge through that corner, keyed by the corner's doubled point (no edge of the
   // conforming mesh has a vertex of it as its midpoint, so no edge key is the same).
   uint32_t CornerVertex(const Node& t, int corner, int s) {
@@ -238,8 +245,8 @@ class LeafEmitter {
     return found != EdgeVertexTable::kMissing ? found : NewCornerVertex(t, corner, mid2, key);
   }
 
-  // A crossing on corner `corner` (CornerVertex): the corner's point, exactly as the edge
-  // interpolation would put it, and its own differences (a mix weighting an edge's other end
+  // A crossing on corner `corner` (CornerVertex): the corner's point, exactly where the edge
+  // interpolation puts it, and the corner's own differences (a mix weighting an edge's other end
   // by 0 would let that end decide the sign of a zero or, infinite, make NaN: edge by edge).
   // Out of line: rare.
   __attribute__((noinline)) uint32_t NewCornerVertex(const Node& t, int corner, PackedPoint mid2,

@@ -23,28 +23,7 @@ struct MarchingTetsCase {
   uint8_t edge_count = 0;     // 0 (no crossing), 3 (triangle) or 4 (quad, in cyclic order)
   uint8_t edge[4][2] = {};    // corner pairs (the lone corner first, in a triangle's case)
   bool flip[2] = {false, false};  // [0]: positively oriented tetrahedron, [1]: negatively
-  // Triangles with an area, by the mask of inside corners whose value equals the isovalue: the
-  // crossings of such a corner's edges all sit on it, and a triangle with two of them has none
-  // (it is not emitted). A quad's two crossings on one corner are neighbours in its cycle, so
-  // either diagonal leaves the same count.
-  uint8_t triangles[16] = {};
 };
-
-// The corner a crossing of case `above` (corners with f >= iso) sits on when that corner's value
-// is the isovalue (bit set in at_iso), or 4 + its edge.
-inline int CrossingPlace(const MarchingTetsCase& mc, unsigned above, unsigned at_iso, int e) {
-  const int in = (above >> mc.edge[e][0]) & 1 ? mc.edge[e][0] : mc.edge[e][1];
-  return (at_iso >> in) & 1 ? in : 4 + e;
-}
-
-// Whether triangle (i, j, k) of a case's crossings has an area, given the inside corners at the
-// isovalue: two crossings on one such corner coincide.
-inline bool HasArea(const MarchingTetsCase& mc, unsigned above, unsigned at_iso, int i, int j,
-                    int k) {
-  auto where = [&](int e) { return CrossingPlace(mc, above, at_iso, e); };
-  const int a = where(i), b = where(j), c = where(k);
-  return a != b && b != c && a != c;
-}
 
 class MarchingTets {
  public:
@@ -78,11 +57,6 @@ class MarchingTets {
         mc.edge_count = 4;
       }
       for (int o = 0; o < 2; ++o) mc.flip[o] = NeedsFlip(mask, mc, o == 1);
-      for (unsigned at_iso = 0; at_iso < 16; ++at_iso) {
-        const unsigned at = at_iso & mask;
-        mc.triangles[at_iso] = uint8_t(HasArea(mc, mask, at, 0, 1, 2) +
-                                       (mc.edge_count == 4 ? HasArea(mc, mask, at, 0, 2, 3) : 0));
-      }
     }
   }
 

@@ -97,6 +97,20 @@ TEST(ExtractBlocks, BitSetsMatchTheirScalarDefinition) {
     ASSERT_EQ(extract_internal::AboveCorners(f, iso), extract_internal::AboveCornersScalar(f, iso))
         << "trial " << trial;
   }
+  // Samples and isovalues are finite (loaders and requests refuse the others).
+  std::uniform_real_distribution<float> fine(-1, 1);
+  int near = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    float f[4];
+    for (float& v : f) v = trial % 3 == 0 ? float(pick(rng)) : fine(rng);
+    const float iso = trial % 5 == 0 ? f[trial % 4] + fine(rng) * 1e-4f : fine(rng);
+    const float tau = trial % 2 == 0 ? 1e-4f : 0.25f;
+    const unsigned m = extract_internal::CornersNearIso(f, iso, tau);
+    ASSERT_EQ(m, extract_internal::CornersNearIsoScalar(f, iso, tau)) << "trial " << trial;
+    near += m != 0;
+  }
+  EXPECT_GT(near, 2000);
+  EXPECT_LT(near, 18000);
 }
 
 }  // namespace
