@@ -262,11 +262,6 @@ int main(int argc, char** argv) {
   if (*o_chunk) config.chunk_triangles = chunk_triangles;
   if (*o_retain) config.retain_mb = retain_mb;
   if (*o_log) config.log_level = log_level;
-  // The default first chunk follows a smaller --chunk-triangles; one that was set is checked.
-  if (config.first_chunk_triangles == DaemonConfig{}.first_chunk_triangles &&
-      config.first_chunk_triangles > config.chunk_triangles)
-    config.first_chunk_triangles = config.chunk_triangles;
-
   const absl::Status valid = isostream::service::ValidateConfig(config);
   if (!valid.ok()) {
     std::fprintf(stderr, "isostreamd: %s\n", std::string(valid.message()).c_str());

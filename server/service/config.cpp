@@ -1,5 +1,6 @@
 #include "server/service/config.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -112,8 +113,11 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
                                          "coarse_triangles", "max_queued_chunks", "retain_mb"},
                                         "frames."));
     ISOSTREAM_RETURN_IF_ERROR(Get(f, "chunk_triangles", "frames.", &c->chunk_triangles));
-    ISOSTREAM_RETURN_IF_ERROR(
-        Get(f, "first_chunk_triangles", "frames.", &c->first_chunk_triangles));
+    if (f.contains("first_chunk_triangles")) {
+      int first = 0;
+      ISOSTREAM_RETURN_IF_ERROR(Get(f, "first_chunk_triangles", "frames.", &first));
+      c->first_chunk_triangles = first;
+    }
     ISOSTREAM_RETURN_IF_ERROR(Get(f, "coarse_triangles", "frames.", &c->coarse_triangles));
     ISOSTREAM_RETURN_IF_ERROR(Get(f, "max_queued_chunks", "frames.", &c->max_queued_chunks));
     ISOSTREAM_RETURN_IF_ERROR(Get(f, "retain_mb", "frames.", &c->retain_mb));
@@ -122,6 +126,10 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
 }
 
 }  // namespace
+
+int FirstChunkTriangles(const DaemonConfig& c) {
+  return c.first_chunk_triangles.value_or(std::min(kDefaultFirstChunkTriangles, c.chunk_triangles));
+}
 
 absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
   std::error_code ec;
@@ -180,7 +188,8 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   // kMaxRawChunkTriangles regardless.
   if (c.chunk_triangles < 256 || c.chunk_triangles > int(kMaxStreamChunkTriangles))
     return bad("chunk_triangles must be in 256.." + std::to_string(kMaxStreamChunkTriangles));
-  if (c.first_chunk_triangles < 256 || c.first_chunk_triangles > c.chunk_triangles)
+  if (c.first_chunk_triangles &&
+      (*c.first_chunk_triangles < 256 || *c.first_chunk_triangles > c.chunk_triangles))
     return bad("first_chunk_triangles must be in 256..chunk_triangles");
   if (c.coarse_triangles < 100) return bad("coarse_triangles must be at least 100");
   if (c.max_queued_chunks < 2 || c.max_queued_chunks > 256)

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <string>
 
 #include "shared/status.h"
@@ -40,7 +41,10 @@ struct DaemonConfig {
   // Frames are cut into chunks of at most this many triangles; the first chunks of a frame are
   // smaller (first_chunk_triangles, doubling) so that the first one leaves early.
   int chunk_triangles = 65536;
-  int first_chunk_triangles = 8192;
+  // Unset, it is kDefaultFirstChunkTriangles, or chunk_triangles when that is smaller (see
+  // FirstChunkTriangles). Kept unset rather than holding the default so that a value someone
+  // wrote, the default's own included, is checked against chunk_triangles and not cut to it.
+  std::optional<int> first_chunk_triangles;
   int coarse_triangles = 20000;  // budget of the coarse frame of a progressive request
   int max_queued_chunks = 8;     // per stream: encoded or encoding, not yet written
   // Each stream keeps its last refined frame's cut, so a new view of the same mesh is
@@ -50,6 +54,12 @@ struct DaemonConfig {
   int shutdown_grace_ms = 5000;  // how long SIGTERM waits for frames in flight
   std::string log_level = "info";
 };
+
+inline constexpr int kDefaultFirstChunkTriangles = 8192;
+
+// The first chunk's size frames are cut with: the one set, else the default within
+// chunk_triangles.
+int FirstChunkTriangles(const DaemonConfig& config);
 
 // Reads a JSON config file over `config` (keys absent from the file keep their value):
 //   {"listen": "127.0.0.1:7878", "threads": 2, "cache_dir": "/var/cache/isostream",

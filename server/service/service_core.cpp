@@ -29,7 +29,7 @@ ServiceCore::ServiceCore(const DaemonConfig& c)
           [&] {
             FrameSettings f;
             f.chunk_triangles = c.chunk_triangles;
-            f.first_chunk_triangles = c.first_chunk_triangles;
+            f.first_chunk_triangles = FirstChunkTriangles(c);
             f.max_queued_chunks = c.max_queued_chunks;
             f.coarse_triangles = c.coarse_triangles;
             f.max_triangles = c.limits.max_triangles;

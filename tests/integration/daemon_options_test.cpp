@@ -479,6 +479,8 @@ TEST_F(OneSlotDaemon, OneCallAtATimeIsNeverRefused) {
 TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
   const std::string first_chunk_config = ::testing::TempDir() + "/first_chunk.json";
   std::ofstream(first_chunk_config) << R"({"frames": {"first_chunk_triangles": 8000}})";
+  const std::string default_first_chunk_config = ::testing::TempDir() + "/default_first_chunk.json";
+  std::ofstream(default_first_chunk_config) << R"({"frames": {"first_chunk_triangles": 8192}})";
   const std::pair<std::string, std::string> refused[] = {
       {"--volume a=sphere:9 --volume a=cayley:9", "--volume names 'a' twice"},
       {"--listen 127.0.0.1:70000", "port in 0..65535"},
@@ -486,6 +488,9 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
       {"--deadline-ms 10000000000000", "deadline_ms must be in 1..86400000"},
       // A first chunk that was set is checked, not cut down to the chunk size.
       {"--chunk-triangles 4096 --config " + first_chunk_config,
+       "first_chunk_triangles must be in 256..chunk_triangles"},
+      // The default's value too, when it was written (it was cut as if left out).
+      {"--chunk-triangles 4096 --config " + default_first_chunk_config,
        "first_chunk_triangles must be in 256..chunk_triangles"},
       {"--max-sessions 2000000000", "max_sessions must be in 1..4096"},
       {"--token ''", "--token is empty"},

@@ -152,6 +152,19 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
   // 2^63 written as a float is past int64 (the bound once let it through, to INT64_MIN).
   EXPECT_NE(message(R"({"limits": {"max_triangles": 9223372036854775807.0}})").find("whole number"),
             std::string::npos);
+  // A first chunk that was written is checked whatever its value, the default's included; only
+  // one left out follows a smaller chunk_triangles.
+  EXPECT_NE(message(R"({"frames": {"chunk_triangles": 4096, "first_chunk_triangles": 8192}})")
+                .find("first_chunk_triangles must be in 256..chunk_triangles"),
+            std::string::npos);
+  EXPECT_EQ(message(R"({"frames": {"chunk_triangles": 4096, "first_chunk_triangles": 4096}})"), "");
+  EXPECT_EQ(message(R"({"frames": {"chunk_triangles": 4096}})"), "");
+  DaemonConfig first;
+  ASSERT_TRUE(LoadText(R"({"frames": {"chunk_triangles": 4096}})", &first).ok());
+  EXPECT_EQ(FirstChunkTriangles(first), 4096);
+  EXPECT_EQ(FirstChunkTriangles(DaemonConfig()), kDefaultFirstChunkTriangles);
+  ASSERT_TRUE(LoadText(R"({"frames": {"first_chunk_triangles": 300}})", &first).ok());
+  EXPECT_EQ(FirstChunkTriangles(first), 300);
   // A directory is named as one, not as invalid JSON.
   ScratchDir dir;
   const absl::Status folder = LoadConfigFile(dir.path(), &c);
