@@ -6,6 +6,7 @@
 #include <glm/geometric.hpp>
 #include <limits>
 
+#include "server/volume/volume_spec.h"
 #include "shared/given_number.h"
 #include "shared/number_list.h"
 
@@ -24,9 +25,22 @@ void AddVolumeOptions(CLI::App* cmd, VolumeArgs* args) {
       ->check(CLI::Range(2, 4097));
 }
 
-absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args) {
+namespace {
+
+VolumeLimits Limits(const VolumeArgs& args) {
   VolumeLimits limits;
   limits.max_dim = args.max_dim;
+  return limits;
+}
+
+}  // namespace
+
+absl::Status CheckVolumeSpec(const VolumeArgs& args) {
+  return ParseVolumeSpec(args.volume, Limits(args)).status();
+}
+
+absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args) {
+  const VolumeLimits limits = Limits(args);
   HierarchyCacheOptions cache;
   if (!args.no_cache) cache.dir = args.cache_dir;
   HierarchyBuildOptions build;

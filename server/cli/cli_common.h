@@ -21,6 +21,11 @@ struct VolumeArgs {
 };
 void AddVolumeOptions(CLI::App* cmd, VolumeArgs* args);
 
+// The spec's own mistakes (ParseVolumeSpec: an unknown generator, a malformed N or raw layout,
+// a size past --max-dim, a file type no loader reads), found without reading anything: usage
+// errors, where Prepare's failures (a missing or damaged file) are not.
+absl::Status CheckVolumeSpec(const VolumeArgs& args);
+
 // Loads, pads and builds (or reads the cached) hierarchy, with a progress line on big volumes.
 absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args);
 

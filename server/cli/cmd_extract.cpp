@@ -59,6 +59,10 @@ int RunExtract(const ExtractArgs& args) {
       return 2;
     }
   }
+  if (const absl::Status spec = CheckVolumeSpec(args.volume); !spec.ok()) {
+    std::cerr << "isostream extract: " << spec.message() << "\n";
+    return 2;
+  }
   auto prepared = Prepare(args.volume);
   if (!prepared.ok()) {
     std::cerr << "isostream extract: " << prepared.status().message() << "\n";

@@ -66,6 +66,10 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
       return 2;
     }
   }
+  if (const absl::Status spec = CheckVolumeSpec(args); !spec.ok()) {
+    std::cerr << "isostream info: " << spec.message() << "\n";
+    return 2;
+  }
   auto prepared = Prepare(args);
   if (!prepared.ok()) {
     std::cerr << "isostream info: " << prepared.status().message() << "\n";

@@ -4,14 +4,12 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <string>
 #include <vector>
 
 #include "server/volume/grid_builder.h"
 #include "server/volume/load.h"
-#include "server/volume/sample_reader.h"
 
 namespace isostream {
 namespace {
@@ -285,19 +283,6 @@ absl::StatusOr<VolumePtr> SamplePoints(std::string_view spec, const char* grid_n
 
 const char* const kGeneratorNames[] = {"cayley", "buckyball", "sphere", "shells", "noise", nullptr};
 
-bool IsGeneratorName(std::string_view name) {
-  for (const char* const* g = kGeneratorNames; *g != nullptr; ++g) {
-    if (name == *g) return true;
-  }
-  return false;
-}
-
-bool ParseInt64(std::string_view s, int64_t* out) {
-  if (s.empty()) return false;
-  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), *out);
-  return ec == std::errc() && end == s.data() + s.size();
-}
-
 }  // namespace
 
 const char* const* GeneratorNames() { return kGeneratorNames; }
@@ -333,61 +318,31 @@ double NoiseValue(double x, double y, double z, uint32_t seed) {
   return sum;
 }
 
-absl::StatusOr<VolumePtr> GenerateVolume(std::string_view spec, const VolumeLimits& limits) {
-  // Split NAME:N[:SEED].
-  std::vector<std::string_view> parts;
-  for (size_t start = 0;;) {
-    const size_t colon = spec.find(':', start);
-    parts.push_back(spec.substr(start, colon == std::string_view::npos ? colon : colon - start));
-    if (colon == std::string_view::npos) break;
-    start = colon + 1;
-  }
-  const std::string_view name = parts[0];
-  const std::string where = "generator spec '" + std::string(spec) + "'";
-  if (!IsGeneratorName(name)) {
-    std::string known;
-    for (const char* const* g = kGeneratorNames; *g != nullptr; ++g) {
-      known += std::string(known.empty() ? "" : ", ") + *g;
-    }
-    return absl::NotFoundError(where + ": unknown generator '" + std::string(name) +
-                               "' (known: " + known + ")");
-  }
-  const size_t max_parts = name == "noise" ? 3 : 2;
-  if (parts.size() < 2 || parts.size() > max_parts) {
-    return absl::InvalidArgumentError(where + ": expected " + std::string(name) +
-                                      (name == "noise" ? ":N[:SEED]" : ":N"));
-  }
-  int64_t n = 0;
-  if (!ParseInt64(parts[1], &n)) {
-    return absl::InvalidArgumentError(where + ": N '" + std::string(parts[1]) +
-                                      "' is not an integer");
-  }
-  ISOSTREAM_RETURN_IF_ERROR(CheckDims({n, n, n}, limits, where));
-  const int size = static_cast<int>(n);
-
+absl::StatusOr<VolumePtr> GenerateVolume(const VolumeSpec& spec) {
+  const std::string_view name = spec.generator;
+  const int size = spec.n;
   if (name == "cayley") {
-    return SamplePoints(spec, "cayley", size,
+    return SamplePoints(spec.text, "cayley", size,
                         [](double x, double y, double z) { return Cayley(x, y, z); });
   }
   if (name == "sphere") {
-    return SamplePoints(spec, "sphere", size,
+    return SamplePoints(spec.text, "sphere", size,
                         [](double x, double y, double z) { return Radius(x, y, z); });
   }
   if (name == "shells") {
-    return SamplePoints(spec, "shells", size,
+    return SamplePoints(spec.text, "shells", size,
                         [](double x, double y, double z) { return Shells(Radius(x, y, z)); });
   }
   if (name == "buckyball") {
     const BuckyballRows rows(AxisCoordinates(size));
-    return SampleRows(spec, "buckyball", size, rows);
+    return SampleRows(spec.text, "buckyball", size, rows);
   }
-  int64_t seed = kNoiseDefaultSeed;
-  if (parts.size() == 3 && (!ParseInt64(parts[2], &seed) || seed < 0 || seed > UINT32_MAX)) {
-    return absl::InvalidArgumentError(where + ": SEED '" + std::string(parts[2]) +
-                                      "' is not an integer in [0, 2^32)");
+  if (name == "noise") {
+    const std::vector<double> coords = AxisCoordinates(size);
+    return SampleRows(spec.text, "noise", size, NoiseRows(coords, spec.seed));
   }
-  const std::vector<double> coords = AxisCoordinates(size);
-  return SampleRows(spec, "noise", size, NoiseRows(coords, static_cast<uint32_t>(seed)));
+  return absl::NotFoundError("generator spec '" + spec.text + "': unknown generator '" +
+                             spec.generator + "'");
 }
 
 }  // namespace isostream

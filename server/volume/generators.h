@@ -15,9 +15,9 @@
 
 #include <array>
 #include <cstdint>
-#include <string_view>
 
 #include "server/volume/volume.h"
+#include "server/volume/volume_spec.h"
 #include "shared/status.h"
 
 namespace isostream {
@@ -87,9 +87,8 @@ double ShellsValue(double r);
 double BuckyballValue(double x, double y, double z);
 double NoiseValue(double x, double y, double z, uint32_t seed);
 
-// Samples the generator SPEC names ("name:N" or "noise:N:SEED"). Errors: NotFound for an
-// unknown name, InvalidArgument for a malformed N or seed or N < 2, ResourceExhausted when N
-// exceeds LIMITS.
-absl::StatusOr<VolumePtr> GenerateVolume(std::string_view spec, const VolumeLimits& limits);
+// Samples the generator a parsed spec names (ParseVolumeSpec has checked its name, N and seed
+// against the limits); the volume is named by the spec's text.
+absl::StatusOr<VolumePtr> GenerateVolume(const VolumeSpec& spec);
 
 }  // namespace isostream

@@ -9,7 +9,8 @@
 //
 // Every failure returns a status whose message names the input and the problem (missing file,
 // wrong magic, truncated data, dims out of range, unsupported type, NaN/Inf sample). A volume is
-// returned only when it loaded whole; nothing half-loaded escapes.
+// returned only when it loaded whole; nothing half-loaded escapes. The spec is taken apart
+// first by ParseVolumeSpec (volume_spec.h), whose refusals come back unchanged.
 #pragma once
 
 #include <string_view>

@@ -3,9 +3,9 @@
 #pragma once
 
 #include <string>
-#include <string_view>
 
 #include "server/volume/volume.h"
+#include "server/volume/volume_spec.h"
 #include "shared/status.h"
 
 namespace isostream {
@@ -24,7 +24,7 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
 absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::string& path,
                                         const VolumeLimits& limits);
 
-// SPEC is "raw:PATH:NXxNYxNZ:TYPE[:le|be]".
-absl::StatusOr<VolumePtr> LoadRawSpec(std::string_view spec, const VolumeLimits& limits);
+// The raw file a parsed "raw:PATH:NXxNYxNZ:TYPE[:le|be]" spec names, in its layout.
+absl::StatusOr<VolumePtr> LoadRawFile(const VolumeSpec& spec);
 
 }  // namespace isostream

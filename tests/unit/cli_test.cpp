@@ -125,6 +125,49 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
   }
 }
 
+// A --volume spec that is wrong as written is a usage error, exit 2, as the other flags' are; a
+// file it names that is missing or damaged is not (exit 1). Both exited 1.
+TEST(Cli, VolumeSpecsWrongAsWrittenAreUsageErrors) {
+  const std::string raw = TempPath("cli-spec.raw");
+  ASSERT_TRUE(WriteFileBytes(raw, std::string(8, '\0')).ok());
+  const std::string notes = TempPath("cli-spec-notes.txt");
+  ASSERT_TRUE(WriteFileBytes(notes, "notes").ok());
+  const std::string damaged = TempPath("cli-spec-damaged.nii");
+  ASSERT_TRUE(WriteFileBytes(damaged, "not a NIfTI header").ok());
+  struct Case {
+    std::string spec, message;
+    int code;
+  };
+  const Case cases[] = {
+      {"nosuch:33", "unknown generator 'nosuch'", 2},
+      {"sphere:x", "N 'x' is not an integer", 2},
+      {"sphere:9:3", "expected sphere:N", 2},
+      {"noise:9:-1", "SEED '-1'", 2},
+      {"sphere:1", "need at least 2 samples per axis", 2},
+      {"sphere:2000", "exceed the limit of 1025 samples per axis", 2},  // --max-dim's default
+      {"raw:" + raw + ":2x2:uint8", "dims '2x2' are not NXxNYxNZ", 2},
+      {"raw:" + raw + ":2x2x2:float", "unsupported type 'float'", 2},
+      {"raw:" + raw + ":2x2x2:uint8:middle", "byte order 'middle'", 2},
+      {notes, "unrecognised volume type", 2},
+      {"buckyball", "unrecognised volume type", 2},
+      {TempPath("cli-spec-missing.nii"), "no such file", 1},
+      {"raw:" + TempPath("cli-spec-missing.raw") + ":2x2x2:uint8", "no such file", 1},
+      {"raw:" + raw + ":2x2x3:uint8", "cli-spec.raw", 1},  // 8 bytes of the 12 it needs
+      {damaged, "cli-spec-damaged.nii", 1},
+  };
+  const std::string out = TempPath("cli-spec.ply");
+  for (const Case& c : cases) {
+    for (const std::string& command :
+         {"info --volume " + c.spec,
+          "extract --volume " + c.spec + " --iso 0.5 --eps 0 -o " + out}) {
+      const CliRun r = Cli(command + " --no-cache");
+      EXPECT_EQ(r.code, c.code) << command << "\n" << r.output;
+      EXPECT_NE(r.output.find(c.message), std::string::npos) << command << "\n" << r.output;
+    }
+  }
+  EXPECT_EQ(Cli("info --volume raw:" + raw + ":2x2x2:uint8 --no-cache").code, 0);
+}
+
 // An isovalue the volume never reaches draws nothing; the user is told so (a typo such as
 // "--iso 0,5" for 0.5 read as two isovalues, 0 and 5, gave a silently empty mesh).
 TEST(Cli, IsovaluesOutsideTheDataAreNamed) {

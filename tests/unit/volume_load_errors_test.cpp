@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "server/volume/load.h"
+#include "server/volume/volume_spec.h"
 #include "volume_files.h"
 
 namespace isostream {
@@ -20,7 +21,7 @@ namespace {
 using namespace volume_files;
 
 TEST(VolumeLoadErrors, MissingFiles) {
-  for (const std::string name : {"missing.nii", "missing.nii.gz", "missing.vdb", "missing.txt"}) {
+  for (const std::string name : {"missing.nii", "missing.nii.gz", "missing.vdb"}) {
     ExpectError(LoadVolume(ScratchPath(name)), absl::StatusCode::kNotFound, name);
   }
   ExpectError(LoadVolume("raw:" + ScratchPath("missing.raw") + ":2x2x2:uint8"),
@@ -33,6 +34,9 @@ TEST(VolumeLoadErrors, NotAVolumeFile) {
   const std::string text = ScratchPath("notes.txt");
   WriteBytes(text, {'h', 'i'});
   ExpectError(LoadVolume(text), absl::StatusCode::kInvalidArgument, "notes.txt");
+  // Refused for its name, there or not: no loader reads it either way.
+  ExpectError(LoadVolume(ScratchPath("missing.txt")), absl::StatusCode::kInvalidArgument,
+              "missing.txt", "unrecognised volume type");
   ExpectError(LoadVolume(ScratchDir() + "/.."), absl::StatusCode::kInvalidArgument, "..");
   const std::string dir = ScratchPath("dir.nii");
   ASSERT_EQ(mkdir(dir.c_str(), 0755), 0);
@@ -510,7 +514,9 @@ TEST(VolumeLoadErrors, BadGeneratorSpecs) {
   ExpectError(LoadVolume("cayley:1026"), absl::StatusCode::kResourceExhausted, "cayley:1026");
   ExpectError(LoadVolume("cayley:99999999999999999999"), absl::StatusCode::kInvalidArgument,
               "cayley:99999999999999999999");
-  ExpectError(LoadVolume("buckyball"), absl::StatusCode::kNotFound, "buckyball");
+  // A name with no known extension, not a missing file: the generators are listed.
+  ExpectError(LoadVolume("buckyball"), absl::StatusCode::kInvalidArgument, "buckyball",
+              "or a generator NAME:N (cayley, buckyball");
   ExpectError(LoadVolume(""), absl::StatusCode::kInvalidArgument, "empty");
 }
 
@@ -540,6 +546,54 @@ TEST(VolumeLoadErrors, MalformedRawSpecs) {
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->dims, (std::array<int, 3>{2, 2, 2}));
   ExpectSamples(**v, [](int64_t i) { return float(StoredValue(Type::kUint16, i)); });
+}
+
+// The spec alone: its parts, read without opening a file, and its own mistakes refused as
+// LoadVolume refuses them, where a missing or damaged file is left to loading.
+TEST(VolumeSpec, ParsedAloneAndRefusedAsLoadVolumeRefusesIt) {
+  absl::StatusOr<VolumeSpec> noise = ParseVolumeSpec("noise:9:7");
+  ASSERT_TRUE(noise.ok()) << noise.status();
+  EXPECT_EQ(noise->source, VolumeSource::kGenerator);
+  EXPECT_EQ(noise->generator, "noise");
+  EXPECT_EQ(noise->n, 9);
+  EXPECT_EQ(noise->seed, 7u);
+  const absl::StatusOr<VolumeSpec> raw =
+      ParseVolumeSpec("raw:" + ScratchPath("missing.raw") + ":3x4x5:int16:be");
+  ASSERT_TRUE(raw.ok()) << raw.status();
+  EXPECT_EQ(raw->source, VolumeSource::kRawFile);
+  EXPECT_EQ(raw->path, ScratchPath("missing.raw"));
+  EXPECT_EQ(raw->dims, (std::array<int, 3>{3, 4, 5}));
+  EXPECT_EQ(raw->sample_type, "int16");
+  EXPECT_TRUE(raw->big_endian);
+  const absl::StatusOr<VolumeSpec> vdb = ParseVolumeSpec(ScratchPath("missing.vdb") + "#density");
+  ASSERT_TRUE(vdb.ok()) << vdb.status();
+  EXPECT_EQ(vdb->source, VolumeSource::kVdbFile);
+  EXPECT_EQ(vdb->path, ScratchPath("missing.vdb"));
+  EXPECT_EQ(vdb->grid_name, "density");
+  const std::string damaged = ScratchPath("spec_damaged.nii");
+  WriteBytes(damaged, {'h', 'i'});
+  for (const std::string& file : {damaged, ScratchPath("missing.nii.gz")}) {
+    const absl::StatusOr<VolumeSpec> nifti = ParseVolumeSpec(file);
+    ASSERT_TRUE(nifti.ok()) << nifti.status();
+    EXPECT_EQ(nifti->source, VolumeSource::kNiftiFile);
+    EXPECT_FALSE(LoadVolume(file).ok()) << file;
+  }
+
+  VolumeLimits limits;
+  limits.max_dim = 8;
+  const std::string ok_raw = ScratchPath("spec_ok.raw");
+  WriteBytes(ok_raw, Samples(Type::kUint8, {2, 2, 2}, false));
+  for (const std::string& spec : std::vector<std::string>{
+           "", "teapot:9", "cayley:1", "cayley:x", "cayley:8:3", "noise:8:-1", "cayley:9",
+           "raw:" + ok_raw + ":2x2:uint8", "raw:" + ok_raw + ":2x2x2:float",
+           "raw:" + ok_raw + ":2x2x2:uint8:middle", "raw:" + ok_raw + ":9x2x2:uint8",
+           "raw::2x2x2:uint8", ScratchPath("spec_notes.txt"), "buckyball"}) {
+    const absl::StatusOr<VolumeSpec> parsed = ParseVolumeSpec(spec, limits);
+    const absl::StatusOr<VolumePtr> loaded = LoadVolume(spec, limits);
+    ASSERT_FALSE(parsed.ok()) << spec;
+    ASSERT_FALSE(loaded.ok()) << spec;
+    EXPECT_EQ(parsed.status(), loaded.status()) << spec;
+  }
 }
 
 }  // namespace
