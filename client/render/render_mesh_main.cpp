@@ -45,64 +45,97 @@ struct Args {
   int orbit = 0;
 };
 
-absl::StatusOr<std::vector<float>> ParseFloats(const std::string& text, const char* what,
-                                               size_t expected) {
-  ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> numbers, ParseNumberList(text, what));
-  if (numbers.size() != expected)
-    return absl::InvalidArgumentError(absl::StrCat(what, " needs ", expected, " numbers"));
-  return std::vector<float>(numbers.begin(), numbers.end());
-}
-
-absl::StatusOr<glm::vec3> ParseVec3(const std::string& text, const char* what) {
-  ISOSTREAM_ASSIGN_OR_RETURN(std::vector<float> v, ParseFloats(text, what, 3));
-  return glm::vec3(v[0], v[1], v[2]);
+absl::StatusOr<glm::dvec3> ParseVec3(const std::string& text, const char* what) {
+  ISOSTREAM_ASSIGN_OR_RETURN(std::vector<double> v, ParseNumberList(text, what));
+  if (v.size() != 3) return absl::InvalidArgumentError(absl::StrCat(what, " needs 3 numbers"));
+  return glm::dvec3(v[0], v[1], v[2]);
 }
 
 absl::Status ParseSize(const std::string& text, int* width, int* height) {
   return ParseImageSize(text, "--size", 16384, width, height);
 }
 
-absl::StatusOr<Camera> MakeCamera(const Args& args, const OrderedMesh& mesh, float aspect) {
-  glm::vec3 lo(0.0f), hi(0.0f);
+// The space the mesh is drawn in: world positions less the centre of the mesh's box, in units
+// of the radius of the sphere about that centre through the farthest vertex, found in double.
+// In single precision the framing of a mesh with coordinates near 1e20 overflowed (its squared
+// lengths pass float's range), and GL would see a far-off mesh with most bits of its
+// coordinates spent on the offset; drawn here, every mesh frames and renders as its copy at
+// unit scale about the origin.
+struct RenderSpace {
+  glm::dvec3 centre{0.0};
+  double scale = 1.0;         // world units per render unit
+  float radius = 0.0f;        // of the framing sphere, in render units: 1, or 0 for a point
+  float box_diagonal = 0.0f;  // of the mesh's box, in render units
+
+  glm::vec3 FromWorld(const glm::dvec3& world) const { return glm::vec3((world - centre) / scale); }
+  glm::dvec3 ToWorld(const glm::vec3& render) const { return centre + scale * glm::dvec3(render); }
+};
+
+glm::dvec3 Position(const OrderedMesh& mesh, size_t i) {
+  return glm::dvec3(mesh.positions[3 * i], mesh.positions[3 * i + 1], mesh.positions[3 * i + 2]);
+}
+
+RenderSpace SpaceOf(const OrderedMesh& mesh) {
+  glm::dvec3 lo(0.0), hi(0.0);
   for (size_t i = 0; i < mesh.vertex_count(); ++i) {
-    const glm::vec3 p(mesh.positions[3 * i], mesh.positions[3 * i + 1], mesh.positions[3 * i + 2]);
-    lo = i == 0 ? p : glm::min(lo, p);
-    hi = i == 0 ? p : glm::max(hi, p);
+    lo = i == 0 ? Position(mesh, i) : glm::min(lo, Position(mesh, i));
+    hi = i == 0 ? Position(mesh, i) : glm::max(hi, Position(mesh, i));
   }
   // Framing uses the sphere about the box centre through the farthest vertex: tighter than the
   // box's own bounding sphere for round meshes such as isosurfaces of blobs.
-  const glm::vec3 centre = 0.5f * (lo + hi);
-  float radius = 0.0f;
-  for (size_t i = 0; i < mesh.vertex_count(); ++i) {
-    const glm::vec3 p(mesh.positions[3 * i], mesh.positions[3 * i + 1], mesh.positions[3 * i + 2]);
-    radius = std::max(radius, glm::length(p - centre));
+  RenderSpace space;
+  space.centre = 0.5 * (lo + hi);
+  double radius = 0.0;
+  for (size_t i = 0; i < mesh.vertex_count(); ++i)
+    radius = std::max(radius, glm::length(Position(mesh, i) - space.centre));
+  if (radius > 0.0) {  // a point keeps world units
+    space.scale = radius;
+    space.radius = 1.0f;
   }
-  radius = std::max(radius, 1e-6f);
+  space.box_diagonal = float(glm::length(hi - lo) / space.scale);
+  return space;
+}
+
+// Positions in place, into `space`.
+void MoveIntoSpace(const RenderSpace& space, OrderedMesh* mesh) {
+  for (size_t i = 0; i < mesh->vertex_count(); ++i) {
+    const glm::vec3 p = space.FromWorld(Position(*mesh, i));
+    for (int a = 0; a < 3; ++a) mesh->positions[3 * i + a] = p[a];
+  }
+}
+
+// The camera in `space`; --eye and --target are world positions.
+absl::StatusOr<Camera> MakeCamera(const Args& args, const RenderSpace& space, float aspect) {
+  const glm::vec3 centre(0.0f);
+  const float radius = std::max(space.radius, 1e-6f);
 
   Camera camera;
   camera.aspect = aspect;
-  ISOSTREAM_ASSIGN_OR_RETURN(camera.up, ParseVec3(args.up, "--up"));
+  ISOSTREAM_ASSIGN_OR_RETURN(const glm::dvec3 up, ParseVec3(args.up, "--up"));
+  camera.up = glm::vec3(up);
   camera.target = centre;
   if (!args.target.empty()) {
-    ISOSTREAM_ASSIGN_OR_RETURN(camera.target, ParseVec3(args.target, "--target"));
+    ISOSTREAM_ASSIGN_OR_RETURN(const glm::dvec3 target, ParseVec3(args.target, "--target"));
+    camera.target = space.FromWorld(target);
   }
   if (!args.view_dir.empty()) {
-    ISOSTREAM_ASSIGN_OR_RETURN(glm::vec3 d, ParseVec3(args.view_dir, "--view-dir"));
-    if (d == glm::vec3(0.0f)) return absl::InvalidArgumentError("--view-dir is zero");
+    ISOSTREAM_ASSIGN_OR_RETURN(const glm::dvec3 d, ParseVec3(args.view_dir, "--view-dir"));
+    if (d == glm::dvec3(0.0)) return absl::InvalidArgumentError("--view-dir is zero");
     camera.projection = Projection::kOrthographic;
     const glm::vec3 target = camera.target;
-    camera = FrameSphere(centre, radius, -d, camera);
+    camera = FrameSphere(centre, radius, glm::vec3(-glm::normalize(d)), camera);
     camera.eye += target - camera.target;
     camera.target = target;
   } else {
     if (!args.eye.empty()) {
-      ISOSTREAM_ASSIGN_OR_RETURN(camera.eye, ParseVec3(args.eye, "--eye"));
+      ISOSTREAM_ASSIGN_OR_RETURN(const glm::dvec3 eye, ParseVec3(args.eye, "--eye"));
+      camera.eye = space.FromWorld(eye);
     } else {
       // isostream extract's default eye, with the mesh's box standing in for the volume's: for
       // a mesh that spans its volume both tools then use the same eye, and the draw order in
       // the file is exact for this picture.
       const glm::vec3 direction = glm::normalize(glm::vec3(0.8f, 0.6f, 1.0f));
-      camera.eye = camera.target + 1.6f * std::max(glm::length(hi - lo), radius) * direction;
+      camera.eye = camera.target + 1.6f * std::max(space.box_diagonal, radius) * direction;
     }
     if (args.fov > 0.0) {
       camera.fov_y_degrees = float(args.fov);
@@ -132,7 +165,9 @@ absl::Status Run(const Args& args) {
   // Before any work: unwritable files were found after rendering.
   ISOSTREAM_RETURN_IF_ERROR(CheckPngOutputs(args.output, args.orbit));
   ISOSTREAM_ASSIGN_OR_RETURN(OrderedMesh mesh, ReadPly(args.input));
-  ISOSTREAM_ASSIGN_OR_RETURN(Camera camera, MakeCamera(args, mesh, float(width) / float(height)));
+  const RenderSpace space = SpaceOf(mesh);
+  ISOSTREAM_ASSIGN_OR_RETURN(Camera camera, MakeCamera(args, space, float(width) / float(height)));
+  MoveIntoSpace(space, &mesh);
 
   HeadlessContextOptions options;
   options.width = width;
@@ -141,7 +176,8 @@ absl::Status Run(const Args& args) {
                              HeadlessContext::Create(options));
   ISOSTREAM_ASSIGN_OR_RETURN(std::unique_ptr<MeshRenderer> renderer, MeshRenderer::Create());
   if (!args.background.empty()) {
-    ISOSTREAM_ASSIGN_OR_RETURN(glm::vec3 bg, ParseVec3(args.background, "--background"));
+    ISOSTREAM_ASSIGN_OR_RETURN(const glm::dvec3 rgb, ParseVec3(args.background, "--background"));
+    const glm::vec3 bg(rgb);
     if (glm::any(glm::lessThan(bg, glm::vec3(0.0f))) ||
         glm::any(glm::greaterThan(bg, glm::vec3(1.0f))))
       return absl::InvalidArgumentError("--background: r,g,b must be in 0..1");
@@ -163,12 +199,13 @@ absl::Status Run(const Args& args) {
   }
   const double ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  const glm::dvec3 eye = space.ToWorld(camera.eye), target = space.ToWorld(camera.target);
   std::fprintf(stderr,
                "%zu triangles, %zu image(s) %dx%d in %.1f ms on %s (%s); eye %.4g,%.4g,%.4g "
                "target %.4g,%.4g,%.4g\n",
                mesh.triangle_count(), cameras.size(), width, height, ms,
-               context->renderer_name().c_str(), context->platform_name().c_str(), camera.eye.x,
-               camera.eye.y, camera.eye.z, camera.target.x, camera.target.y, camera.target.z);
+               context->renderer_name().c_str(), context->platform_name().c_str(), eye.x, eye.y,
+               eye.z, target.x, target.y, target.z);
   return absl::OkStatus();
 }
 

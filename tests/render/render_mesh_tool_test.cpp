@@ -2,6 +2,7 @@
 // bad inputs (flags, files) end in a clear message and a non-zero exit status, never a crash.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <string>
 #include <utility>
@@ -74,6 +75,53 @@ TEST_F(RenderMeshTool, OrbitWritesNumberedImagesThatDiffer) {
   EXPECT_EQ(second->width, 48);
   // Half a turn apart, the off-centre inner spheres are seen from the other side.
   EXPECT_NE(first->rgba, second->rgba);
+}
+
+// A mesh far from the origin and huge is drawn as its copy near the origin at unit scale, from
+// the same eye: framing is found in double and the mesh drawn relative to its centre. In float
+// the squared lengths of a mesh 1e20 across overflowed, and it was refused as degenerate.
+TEST_F(RenderMeshTool, AMeshFarOutAndHugeLooksLikeItsCopyAtUnitScale) {
+  const OrderedMesh unit = testing::MakeSpheres(testing::ThreeNestedSpheres(), 3);
+  struct Move {
+    double scale, offset;
+  };
+  const auto moved_ply = [&](const Move& m, const std::string& name) {
+    OrderedMesh copy = unit;
+    for (float& c : copy.positions) c = float(double(c) * m.scale + m.offset);
+    const std::string path = Temp(name);
+    EXPECT_TRUE(WritePly(copy, path).ok());
+    return path;
+  };
+  const auto eye_flag = [](const Move& m) {
+    char text[128];
+    std::snprintf(text, sizeof(text), " --eye %.17g,%.17g,%.17g", 0.5 * m.scale + m.offset,
+                  1.0 * m.scale + m.offset, 4.0 * m.scale + m.offset);
+    return std::string(text);
+  };
+  const auto render = [&](const std::string& ply, const std::string& flags,
+                          const std::string& name) -> Image {
+    const std::string png = Temp(name);
+    const auto r = RenderMesh(ply + " -o " + png + " --size 96x72" + flags);
+    EXPECT_EQ(r.code, 0) << flags << "\n" << r.output;
+    absl::StatusOr<Image> image = ReadPng(png);
+    EXPECT_TRUE(image.ok()) << name << ": " << image.status();
+    return image.ok() ? *image : Image{};
+  };
+  const Move moves[] = {{1e18, 1e20}, {1e20, 0.0}, {1e20, 1e20}};
+  for (const std::string view : {"", " --view-dir 1,-2,-3", "eye"}) {
+    const Image expected = render(ply_, view == "eye" ? eye_flag({1.0, 0.0}) : view, "unit.png");
+    ASSERT_EQ(expected.width, 96) << view;
+    EXPECT_GT(testing::Coverage(expected, glm::vec3(1.0f)), 0.2) << view;
+    for (const Move& m : moves) {
+      const std::string name = "moved_" + std::to_string(&m - moves);
+      const Image image =
+          render(moved_ply(m, name + ".ply"), view == "eye" ? eye_flag(m) : view, name + ".png");
+      // Positions differ from the unit copy's by a float rounding at most.
+      const double difference = MeanAbsoluteDifference(image, expected);
+      EXPECT_GE(difference, 0.0) << "sizes differ";
+      EXPECT_LT(difference, 1e-4) << view << ", scale " << m.scale << ", offset " << m.offset;
+    }
+  }
 }
 
 TEST_F(RenderMeshTool, BadInputsExitNonZeroWithAClearMessage) {
