@@ -287,6 +287,35 @@ TEST(Extract, IsovaluesOnOrNextToSampleValuesGiveNoTrianglesWithoutArea) {
     }
 }
 
+// Two or three float steps above the terrace 0.5 (grid units, origin 0): a crossing ~5e-7 of an
+// edge from a corner keeps that offset on a small coordinate and loses it on a larger one, so
+// the crossings of an axis edge and a diagonal edge from one corner are stored at one point that
+// is not the corner. They are two vertices there, and the triangle through both has no area
+// (brute-force marching tetrahedra leaves it out).
+TEST(Extract, IsovaluesAFewFloatStepsOffSampleValuesGiveNoTwoVerticesInOnePlace) {
+  const auto h = MakeHierarchy(5, testing::TerracesField);
+  for (int steps : {2, 3}) {
+    float iso = 0.5f;
+    for (int i = 0; i < steps; ++i) iso = std::nextafter(iso, 1.0f);
+    const std::string what = std::to_string(steps) + " float steps above 0.5";
+    const auto res = RunExtract(*h, Request({iso}, 0.0, {40, -30, 20}));
+    const OrderedMesh& m = res.mesh;
+    EXPECT_GT(m.triangle_count(), 5000u) << what;
+    size_t two_in_one_place = 0;
+    for (size_t t = 0; t < m.triangle_count(); ++t) {
+      glm::vec3 p[3];
+      for (int i = 0; i < 3; ++i) {
+        const float* q = &m.positions[3 * size_t(m.triangles[3 * t + i])];
+        p[i] = {q[0], q[1], q[2]};
+      }
+      two_in_one_place += p[0] == p[1] || p[1] == p[2] || p[2] == p[0];
+    }
+    EXPECT_EQ(two_in_one_place, 0u) << what;
+    ExpectWatertight(m, what);
+    EXPECT_TRUE(MeshTriangles(m) == BruteForce(*h, {iso})) << what;
+  }
+}
+
 // The bound that decides which components are placed exactly: every crossing whose stored
 // position is one of its edge's ends must have that end flagged by CornersNearIso, for grids
 // up to 4097 points, origins up to 8e6 and spacings from 1e-3 to 1e3 (crossings from 1e-9 of an
@@ -316,7 +345,8 @@ TEST(Extract, EveryCrossingThatRoundsOntoACornerIsFlagged) {
     const float iso = trial % 2 ? float(fa + t * (fb - fa)) : float(fb - t * (fb - fa));
     if (!(iso > fa && iso <= fb)) continue;
     ++checked;
-    const extract_internal::PackedPoint pa = extract_internal::Pack(a), pb = extract_internal::Pack(b);
+    const extract_internal::PackedPoint pa = extract_internal::Pack(a),
+                                        pb = extract_internal::Pack(b);
     const glm::vec3 q = extract_internal::EdgeCrossingWorld(c, pa, pb, fa, fb, iso);
     const float f[4] = {fa, fb, fa, fb};  // the least band a tetrahedron with this edge gets
     const unsigned near = extract_internal::CornersNearIso(f, iso, c.snap_tau);
