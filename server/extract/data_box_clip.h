@@ -155,10 +155,33 @@ inline int SnappedCorner(const Context& c, const Node& t, int ia, int ib, const 
   return -1;
 }
 
+// The stored position of a crossing q of edge (ia, ib) of leaf t that is on neither end: a
+// coordinate that rounded onto an end's, on an axis along which the edge runs, moves one float
+// step towards the other end's. Left there, the crossing could be stored where the crossing of
+// another edge from that end is: ~5e-7 of an edge from a corner, the offset is kept on a small
+// coordinate and lost on a larger one (two float steps above integer terraces in grid units,
+// 46% of the triangles had two vertices in one place). Moved, crossings of two edges from one
+// corner differ on an axis along which one of the edges runs (the hierarchy's edges run along
+// axes and face and body diagonals, from a corner into different directions). SnapTau's bound
+// is per axis, so the components that need this take the exact path; the others have no such
+// coordinate. Symmetric in the ends, so every tetrahedron around the edge moves alike.
+inline glm::vec3 OffTheEnds(const Context& c, const Node& t, int ia, int ib, glm::vec3 q) {
+  const glm::vec3 pa = CornerWorld(c, t.v[ia]), pb = CornerWorld(c, t.v[ib]);
+  for (int a = 0; a < 3; ++a) {
+    if (pa[a] == pb[a]) continue;  // the edge does not run along a (or a float step is longer)
+    if (q[a] == pa[a])
+      q[a] = std::nextafter(q[a], pb[a]);
+    else if (q[a] == pb[a])
+      q[a] = std::nextafter(q[a], pa[a]);
+  }
+  return q;
+}
+
 // The crossings of sorted isovalue s on tetrahedron t as LeafEmitter places them: on which
 // corner each sits (its stored position rounds onto the corner's, as it does when the corner's
-// value is the isovalue) or 4 + its edge, its stored position, and the fan's order (a quad
-// rotated to split along its shorter diagonal). mc is the case of t for s, with crossings.
+// value is the isovalue) or 4 + its edge, its stored position (OffTheEnds), and the fan's order
+// (a quad rotated to split along its shorter diagonal). mc is the case of t for s, with
+// crossings.
 struct ComponentCrossings {
   int edges;
   int where[4];
@@ -174,7 +197,7 @@ struct ComponentCrossings {
       const glm::vec3 q = EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c.iso[s]);
       const int corner = SnappedCorner(c, t, ia, ib, q);
       where[i] = corner >= 0 ? corner : 4 + i;
-      p[i] = glm::dvec3(q);
+      p[i] = glm::dvec3(corner >= 0 ? q : OffTheEnds(c, t, ia, ib, q));
     }
     if (edges == 4 && QuadSplitsAlong13(p)) std::rotate(cycle, cycle + 1, cycle + 4);
   }

@@ -192,7 +192,7 @@ class LeafEmitter {
     for (int i = 0; i < edges; ++i)
       if ((used >> i) & 1)
         made[i] = x.where[i] < 4 ? CornerVertex(t, x.where[i], s)
-                                 : EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
+                                 : EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s, &x.p[i]);
     uint32_t v[4];
     for (int i = 0; i < edges; ++i) v[i] = (used >> x.Corner(i)) & 1 ? made[x.Corner(i)] : 0;
     const bool flip = mc.flip[c_.negative[t.cls.value]];
@@ -226,12 +226,13 @@ class LeafEmitter {
   // The crossing of surface s on the edge between corners ia and ib: found by edge key, or
   // computed (interpolated from the edge's lexicographically smaller end, so every
   // tetrahedron around the edge produces the same bits) and stored.
-  uint32_t EdgeVertex(const Node& t, int ia, int ib, int s) {
+  // `placed`: the position ComponentCrossings stores it at (OffTheEnds), on the exact path.
+  uint32_t EdgeVertex(const Node& t, int ia, int ib, int s, const glm::dvec3* placed = nullptr) {
     const PackedPoint mid2 = t.v[ia] + t.v[ib];
-    if (c_.normals != NormalMode::kSmooth) return NewVertex(t, ia, ib, s, mid2, 0);
+    if (c_.normals != NormalMode::kSmooth) return NewVertex(t, ia, ib, s, mid2, 0, placed);
     const uint64_t key = EdgeKey(mid2, s);
     const uint32_t found = table_->FindOrInsert(key, out_->vertices);
-    return found != EdgeVertexTable::kMissing ? found : NewVertex(t, ia, ib, s, mid2, key);
+    return found != EdgeVertexTable::kMissing ? found : NewVertex(t, ia, ib, s, mid2, key, placed);
   }
 
   // The crossings of surface s stored on corner `corner` (ComponentCrossings): one vertex for
@@ -284,13 +285,14 @@ class LeafEmitter {
 
   // Out of line: most lookups hit, and the hit path stays small enough to inline.
   __attribute__((noinline)) uint32_t NewVertex(const Node& t, int ia, int ib, int s,
-                                               PackedPoint mid2, uint64_t key) {
+                                               PackedPoint mid2, uint64_t key,
+                                               const glm::dvec3* placed) {
     const bool share = c_.normals == NormalMode::kSmooth;
     glm::ivec3 a = Unpack(t.v[ia]), b = Unpack(t.v[ib]), d;
     float fa = t.f[ia], fb = t.f[ib];
     OrientEdge(a, b, fa, fb, d);
     const float tt = CrossingParameter(c_.iso[s], fa, fb);
-    const glm::vec3 pw = CrossingWorld(c_, a, d, tt);
+    const glm::vec3 pw = placed != nullptr ? glm::vec3(*placed) : CrossingWorld(c_, a, d, tt);
     glm::vec3 grad;
     if (share) {
       grad = glm::mix(GridGradient(a), GridGradient(b), tt);
