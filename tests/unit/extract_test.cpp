@@ -321,6 +321,32 @@ TEST(Extract, IsovaluesAFewFloatStepsOffSampleValuesGiveNoTwoVerticesInOnePlace)
   }
 }
 
+// A peak of 4 at grid point (8, 8, 8), its neighbours at +x and +y 0, its other 24 neighbours
+// 3, and 0 elsewhere: a closed surface around the peak. Four float steps below 4 (grid units),
+// the crossings towards the 0s are 2.4e-7 of an edge from the peak and round onto it, those
+// towards the 3s (9.5e-7) do not. Only the crossings at +x and +y become the peak's vertex:
+// two vertices of the small closed surface that no triangle joins are made one, and the edges
+// both shared (to the crossings at +x+y, +x+y+z, +x+y-z) are each used by four triangles. Left
+// on their edges (as without snapping) the surface is closed and manifold.
+float PeakWithTwoLowNeighbours(double x, double y, double z) {
+  const glm::ivec3 p(int(std::lround((x + 1) * 8)), int(std::lround((y + 1) * 8)),
+                     int(std::lround((z + 1) * 8)));
+  const glm::ivec3 off = p - glm::ivec3(8);
+  if (off == glm::ivec3(0)) return 4;
+  if (off == glm::ivec3(1, 0, 0) || off == glm::ivec3(0, 1, 0)) return 0;
+  return glm::all(glm::lessThanEqual(glm::abs(off), glm::ivec3(1))) ? 3 : 0;
+}
+
+TEST(Extract, CrossingsNextToAPeakKeepTheSurfaceManifold) {
+  const auto h = MakeHierarchy(4, PeakWithTwoLowNeighbours);
+  float iso = 4;
+  for (int i = 0; i < 4; ++i) iso = std::nextafter(iso, 0.0f);
+  const auto res = RunExtract(*h, Request({iso}, 0.0, {40, -30, 20}));
+  EXPECT_GT(res.mesh.triangle_count(), 40u);
+  ExpectWatertight(res.mesh, "four float steps below a peak of 4");
+  EXPECT_TRUE(MeshTriangles(res.mesh) == BruteForce(*h, {iso}));
+}
+
 // The bound that decides which components are placed exactly: every crossing whose stored
 // position, or a coordinate of it along the edge, is one of its edge's ends' must have that end
 // flagged by CornersNearIso, for grids up to 4097 points, origins up to 8e6 and spacings from
