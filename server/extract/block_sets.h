@@ -61,10 +61,10 @@ inline unsigned AboveCorners(const float* f, float iso) {
 }
 
 // Corners whose value is within tau times the largest distance of a corner's value from iso,
-// doubled: a superset of those a crossing can round onto (Context::snap_tau bounds the parameter
-// of a crossing whose stored position is one of its edge's ends, and a crossed edge's values
-// differ by at most that doubled distance). A superset is harmless (such components take the
-// exact path); a missed corner would not be.
+// doubled: a superset of those a crossing can round onto, on some coordinate (Context::snap_tau
+// bounds the parameter of a crossing with a stored coordinate of one of its edge's ends, and a
+// crossed edge's values differ by at most that doubled distance). A superset is harmless (such
+// components take the exact path); a missed corner would not be.
 inline unsigned CornersNearIsoScalar(const float* f, float iso, float tau) {
   float dist[4], farthest = 0;
   for (int i = 0; i < 4; ++i) farthest = std::max(farthest, dist[i] = std::abs(f[i] - iso));

@@ -144,27 +144,28 @@ inline int ClippedTriangleCount(const Context& c, const glm::vec3& a, const glm:
   return triangles;
 }
 
-// The corner (ia or ib) of leaf t whose stored position the crossing's stored position q is,
-// or -1. The edge's lexicographically smaller end is tested first, so every tetrahedron around
-// the edge decides alike even where the world transform maps both ends to one point.
-inline int SnappedCorner(const Context& c, const Node& t, int ia, int ib, const glm::vec3& q) {
-  const glm::ivec3 d = Unpack(t.v[ib]) - Unpack(t.v[ia]);
-  if ((d.x != 0 ? d.x : d.y != 0 ? d.y : d.z) < 0) std::swap(ia, ib);
-  if (q == CornerWorld(c, t.v[ia])) return ia;
-  if (q == CornerWorld(c, t.v[ib])) return ib;
-  return -1;
+// The corner (ia or ib) of leaf t that the crossing of iso on edge (ia, ib) is on, or -1: the
+// edge's end whose value is the isovalue (its parameter is 0 or 1, its stored position the
+// corner's). Decided by value, not by the stored position: a crossing that only rounds onto a
+// corner is moved off it (OffTheEnds). Were it the corner's vertex, the corner's vertex would
+// stand for some of its crossings and not others (those on edges with other value differences,
+// or other rounding), and two vertices of one closed surface that no triangle joins could be
+// made one: edges used by four triangles.
+inline int CornerAtIso(const Node& t, int ia, int ib, float iso) {
+  return t.f[ia] == iso ? ia : t.f[ib] == iso ? ib : -1;
 }
 
-// The stored position of a crossing q of edge (ia, ib) of leaf t that is on neither end: a
-// coordinate that rounded onto an end's, on an axis along which the edge runs, moves one float
-// step towards the other end's. Left there, the crossing could be stored where the crossing of
-// another edge from that end is: ~5e-7 of an edge from a corner, the offset is kept on a small
-// coordinate and lost on a larger one (two float steps above integer terraces in grid units,
-// 46% of the triangles had two vertices in one place). Moved, crossings of two edges from one
-// corner differ on an axis along which one of the edges runs (the hierarchy's edges run along
-// axes and face and body diagonals, from a corner into different directions). SnapTau's bound
-// is per axis, so the components that need this take the exact path; the others have no such
-// coordinate. Symmetric in the ends, so every tetrahedron around the edge moves alike.
+// The stored position of a crossing q of edge (ia, ib) of leaf t that is on neither end (no end
+// at the isovalue): a coordinate that rounded onto an end's, on an axis along which the edge
+// runs, moves one float step towards the other end's. Left there, the crossing could be stored
+// where the crossing of another edge from that end is: one float step above integer terraces,
+// every coordinate rounds onto the corner (64% of the triangles had two vertices in one place);
+// two steps above, ~5e-7 of an edge is kept on a small coordinate and lost on a larger one (46%).
+// Moved, crossings of two edges from one corner differ on an axis along which one of the edges
+// runs (the hierarchy's edges run along axes and face and body diagonals, from a corner into
+// different directions), and no triangle loses its area. SnapTau's bound is per axis, so the
+// components that need this take the exact path; the others have no such coordinate. Symmetric
+// in the ends, so every tetrahedron around the edge moves alike.
 inline glm::vec3 OffTheEnds(const Context& c, const Node& t, int ia, int ib, glm::vec3 q) {
   const glm::vec3 pa = CornerWorld(c, t.v[ia]), pb = CornerWorld(c, t.v[ib]);
   for (int a = 0; a < 3; ++a) {
@@ -178,10 +179,9 @@ inline glm::vec3 OffTheEnds(const Context& c, const Node& t, int ia, int ib, glm
 }
 
 // The crossings of sorted isovalue s on tetrahedron t as LeafEmitter places them: on which
-// corner each sits (its stored position rounds onto the corner's, as it does when the corner's
-// value is the isovalue) or 4 + its edge, its stored position (OffTheEnds), and the fan's order
-// (a quad rotated to split along its shorter diagonal). mc is the case of t for s, with
-// crossings.
+// corner each sits (CornerAtIso) or 4 + its edge, its stored position (OffTheEnds), and the
+// fan's order (a quad rotated to split along its shorter diagonal). mc is the case of t for s,
+// with crossings.
 struct ComponentCrossings {
   int edges;
   int where[4];
@@ -195,7 +195,7 @@ struct ComponentCrossings {
     for (int i = 0; i < edges; ++i) {
       const int ia = mc.edge[i][0], ib = mc.edge[i][1];
       const glm::vec3 q = EdgeCrossingWorld(c, t.v[ia], t.v[ib], t.f[ia], t.f[ib], c.iso[s]);
-      const int corner = SnappedCorner(c, t, ia, ib, q);
+      const int corner = CornerAtIso(t, ia, ib, c.iso[s]);
       where[i] = corner >= 0 ? corner : 4 + i;
       p[i] = glm::dvec3(corner >= 0 ? q : OffTheEnds(c, t, ia, ib, q));
     }

@@ -133,7 +133,8 @@ class LeafEmitter {
     const MarchingTetsCase& mc = (*c_.cases)[above];
     if (mc.edge_count == 0) return 0;
     if (c_.clip && !InsideDataBox(c_, t)) return StraddlingComponent(t, s, mc);
-    // A crossing that may round onto a corner (its value at or next to the isovalue) is placed
+    // A component with a corner at the isovalue (its crossings are the corner's vertex) or next
+    // to it (a crossing's coordinate may round onto the corner's: OffTheEnds) is placed
     // exactly, out of line.
     if (CornersNearIso(t.f, iso, c_.snap_tau) != 0) return ComponentNearCorners(t, s, mc);
     const int count = mc.edge_count - 2;
@@ -175,12 +176,13 @@ class LeafEmitter {
     return ComponentThroughCorners(t, s, mc, false);
   }
 
-  // A component whose crossings may round onto corners (a corner's value is the isovalue, as in
-  // flat or integer data, or within a rounding of it): the crossings stored on one corner are
-  // one vertex, named by the corner, and a triangle left without an area is not emitted (most of
-  // a terrace's triangles had none; at an isovalue one float step off integer data, 64% had two
-  // corners in one place). Also the path of straddling leaves (`clip`). Without such crossings
-  // it emits what Component does, vertex for vertex.
+  // A component with crossings on corners whose value is the isovalue (flat or integer data):
+  // the crossings of one such corner are one vertex, named by the corner, and a triangle left
+  // without an area is not emitted (most of a terrace's triangles had none); or with crossings
+  // that round onto a corner on some coordinate, moved off it (OffTheEnds: one float step off
+  // integer data, 64% of the triangles had two corners in one place). Also the path of
+  // straddling leaves (`clip`). Without such crossings it emits what Component does, vertex for
+  // vertex.
   int ComponentThroughCorners(const Node& t, int s, const MarchingTetsCase& mc, bool clip) {
     const ComponentCrossings x(c_, t, s, mc);
     const int edges = x.edges;

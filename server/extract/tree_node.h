@@ -65,10 +65,10 @@ struct Context {
   GridToWorld xf;
   glm::vec3 world_origin{0.0f}, world_spacing{1.0f};  // xf in single precision
   glm::vec3 inv_spacing{1.0f};                        // grid-space gradient -> world-space gradient
-  // A bound on the parameter t (or 1 - t) of any crossing whose stored position rounds onto an
-  // end of its edge (extractor.cpp, SnapTau): only components with a corner within snap_tau
-  // times their value range of the isovalue need their crossings placed exactly
-  // (CornersNearIso, ComponentCrossings).
+  // A bound on the parameter t (or 1 - t) of any crossing with a stored coordinate that rounds
+  // onto an end's (extractor.cpp, SnapTau): only components with a corner within snap_tau times
+  // their value range of the isovalue need their crossings placed exactly (CornersNearIso,
+  // ComponentCrossings, OffTheEnds).
   float snap_tau = 0;
   const ReferenceTets* tables = nullptr;
   const BlockTables* blocks = nullptr;

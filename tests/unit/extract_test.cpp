@@ -243,10 +243,10 @@ TEST(Extract, ASymmetricSaddleCornerGetsANormal) {
 }
 
 // Isovalues on sample values, and a float step or a rounding off them: crossings that round
-// onto a corner are that corner's vertex too. One step above the terrace 0.5, 64% of the
+// onto a corner are moved off it (OffTheEnds). One step above the terrace 0.5, 64% of the
 // triangles had two corners in one place; with the origin far from the grid, crossings up to a
 // few 1e-6 of an edge from a corner round onto it. (Farther off, a crossing can round onto a
-// corner on some coordinates only: OffTheEnds, the next test.)
+// corner on some coordinates only: the next test.)
 TEST(Extract, IsovaluesOnOrNextToSampleValuesGiveNoTrianglesWithoutArea) {
   const auto h = MakeHierarchy(5, testing::TerracesField);
   struct Case {

@@ -1,10 +1,11 @@
 // Test helper: marching tetrahedra on one tetrahedron, written directly from the conventions
 // the extractor documents, to compare its output with as a set of triangles: a vertex is inside
 // when f >= iso; a crossing is interpolated from the lexicographically smaller endpoint
-// (parameter in double, point in single precision), and a coordinate of a crossing that is not
-// an endpoint but has an endpoint's coordinate on an axis along which the edge runs moves one
-// float step towards the other endpoint's; a quad is split along its shorter diagonal (ties
-// broken by position); a triangle without an area (two crossings on one corner) is left out.
+// (parameter in double, point in single precision), and a coordinate of a crossing whose
+// endpoints' values are not the isovalue that has an endpoint's coordinate on an axis along
+// which the edge runs moves one float step towards the other endpoint's; a quad is split along
+// its shorter diagonal (ties broken by position); a triangle without an area (two crossings on a
+// corner whose value is the isovalue) is left out.
 #pragma once
 
 #include <algorithm>
@@ -53,9 +54,10 @@ inline void MarchTet(const glm::ivec3 v[4], const float f[4], const std::vector<
       glm::ivec3 a = v[i], b = v[j];
       float fa = f[i], fb = f[j];
       if (std::tie(b.x, b.y, b.z) < std::tie(a.x, a.y, a.z)) std::swap(a, b), std::swap(fa, fb);
+      if (fa == iso[s]) return glm::vec3(a);
+      if (fb == iso[s]) return glm::vec3(b);
       const float t = float((double(iso[s]) - fa) / (double(fb) - fa));
       glm::vec3 q = glm::vec3(a) + t * glm::vec3(b - a);
-      if (q == glm::vec3(a) || q == glm::vec3(b)) return q;
       for (int axis = 0; axis < 3; ++axis) {
         if (a[axis] == b[axis]) continue;
         if (q[axis] == float(a[axis]))
