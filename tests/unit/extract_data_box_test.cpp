@@ -164,5 +164,59 @@ TEST(ExtractDataBox, CountsWhatItEmitsAndBudgetsBoundTheFrame) {
   }
 }
 
+// Isovalues on, and one to three float steps off, integer samples, in volumes that need
+// clipping at the data box, under unit voxels and under spacings from 1e-3 to 7 per axis with
+// origins up to 2e5 (crossings round onto corners on some coordinates or all): counts equal
+// emitted triangles at every eps tried, at every eta code (the count curve against single
+// counts), and within budgets; no triangle has two corners in one place.
+TEST(ExtractDataBox, IsovaluesNextToIntegerSamplesCountWhatTheyEmit) {
+  testing::ScratchDir dir;
+  auto steps = [](float v, int n) {
+    for (int i = 0; i < std::abs(n); ++i) v = std::nextafter(v, n > 0 ? 10.0f : -10.0f);
+    return v;
+  };
+  const std::vector<float> iso = {steps(1, 1), steps(2, -2), 2, steps(3, 3), steps(2, 1)};
+  GridToWorld far, fine;
+  far.origin = {1e5, -2e5, 5e4};
+  far.spacing = {0.3, 7, 0.3};
+  fine.origin = {-700, 300, 1000};
+  fine.spacing = {1e-3, 0.3, 7};
+  for (const RawVolume& raw : {RandomIntegers(19, 12, 5, 5), RandomIntegers(9, 14, 6, 8)}) {
+    const PreparedVolume v = Prepare(raw, dir);
+    ASSERT_NE(v.hierarchy, nullptr) << raw.name;
+    for (const GridToWorld& xf : {v.grid_to_world, far, fine}) {
+      const std::string name = raw.name + " spacing " + std::to_string(xf.spacing.x);
+      int64_t largest = 0;
+      for (double eps : {0.0, 0.1, 0.5, 1.5}) {
+        const std::string what = name + " eps " + std::to_string(eps);
+        const auto res = Extract(*v.hierarchy, xf, Request(iso, eps, 0));
+        ASSERT_TRUE(res.ok()) << what << ": " << res.status();
+        const auto counted = CountTriangles(*v.hierarchy, xf, Request(iso, eps, 0), eps);
+        ASSERT_TRUE(counted.ok()) << what;
+        EXPECT_EQ(*counted, int64_t(res->mesh.triangle_count())) << what;
+        ExpectCleanMesh(res->mesh, raw, xf, what);
+        largest = std::max(largest, *counted);
+      }
+      EXPECT_GT(largest, 500) << name;
+      const uint32_t first = EtaCodeAtLeast(1e-3), last = CoarsestEtaCode(*v.hierarchy);
+      const auto curve =
+          CountTrianglesPerEtaCode(*v.hierarchy, xf, Request(iso, 0, 0), first, last);
+      ASSERT_TRUE(curve.ok()) << name;
+      for (uint32_t code = first; code <= last; code += 97) {
+        const double eps = EtaCodeEps(code);
+        const auto counted = CountTriangles(*v.hierarchy, xf, Request(iso, eps, 0), eps);
+        ASSERT_TRUE(counted.ok());
+        EXPECT_EQ((*curve)[code - first], *counted) << name << " code " << code;
+      }
+      for (int64_t budget : {largest / 5, largest / 2}) {
+        const auto res = Extract(*v.hierarchy, xf, Request(iso, 0, budget));
+        ASSERT_TRUE(res.ok()) << name;
+        EXPECT_LE(int64_t(res->mesh.triangle_count()), budget) << name;
+        ExpectCleanMesh(res->mesh, raw, xf, name + " budget " + std::to_string(budget));
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace isostream
