@@ -317,7 +317,9 @@ TEST(Extract, IsovaluesAFewFloatStepsOffSampleValuesGiveNoTwoVerticesInOnePlace)
     auto counted = CountTriangles(*h, xf, Request({iso}, 0.0, {40, -30, 20}), 0.0);
     ASSERT_TRUE(counted.ok());
     EXPECT_EQ(*counted, int64_t(m.triangle_count())) << what;
-    if (steps < 20) EXPECT_TRUE(MeshTriangles(m) == BruteForce(*h, {iso})) << what;
+    if (steps < 20) {
+      EXPECT_TRUE(MeshTriangles(m) == BruteForce(*h, {iso})) << what;
+    }
   }
 }
 
@@ -395,8 +397,12 @@ TEST(Extract, EveryCrossingThatRoundsOntoACornerIsFlagged) {
     for (int axis = 0; axis < 3; ++axis) {
       if (d[axis] == 0) continue;
       partly += q != wa && q != wb && (q[axis] == wa[axis] || q[axis] == wb[axis]);
-      if (q[axis] == wa[axis]) ASSERT_TRUE(near & 1u) << "trial " << trial << " axis " << axis;
-      if (q[axis] == wb[axis]) ASSERT_TRUE(near & 2u) << "trial " << trial << " axis " << axis;
+      if (q[axis] == wa[axis]) {
+        ASSERT_TRUE(near & 1u) << "trial " << trial << " axis " << axis;
+      }
+      if (q[axis] == wb[axis]) {
+        ASSERT_TRUE(near & 2u) << "trial " << trial << " axis " << axis;
+      }
     }
   }
   EXPECT_GT(checked, 300000);
