@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <thread>
 
 #include "shared/malloc_tuning.h"
 
@@ -110,6 +111,7 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
   const std::string spec = options_.volumes.empty() ? name : options_.volumes.at(name);
   HierarchyBuildOptions build;
   build.threads = options_.build_threads;
+  if (options_.prepare_delay.count() > 0) std::this_thread::sleep_for(options_.prepare_delay);
   auto prepared = PrepareVolume(spec, options_.limits, options_.cache, build);
   if (!prepared.ok()) {
     spdlog::error("preparing volume '{}' ({}) failed: {}", name, spec,

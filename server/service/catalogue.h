@@ -50,6 +50,10 @@ struct CatalogueOptions {
   // 5 x max_generator_dim of them, each up to 257^3 x 8 bytes): the least recently used is
   // dropped beyond this. Frames in progress keep their volume alive until they end.
   int max_generator_volumes = 8;
+  // Test hook: every preparation first sleeps this long, so daemon tests can have a volume
+  // that is slow to prepare without big data (isostreamd takes it from the environment
+  // variable ISOSTREAMD_TEST_PREPARE_DELAY_MS).
+  std::chrono::milliseconds prepare_delay{0};
 };
 
 // The box and bit count for a volume's frames: bits = the fewest that make the quantization

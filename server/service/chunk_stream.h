@@ -317,8 +317,14 @@ class ChunkStream : public Reactor, public StreamBase {
 
   absl::Status RunView(const pb::ViewRequest& view, const ExtractRequest& request,
                        uint64_t generation, std::atomic<bool>* cancel, Clock::time_point received) {
+    const Clock::time_point asked = Clock::now();
     auto volume = core_->catalogue.Get(view.volume());
     if (!volume.ok()) return volume.status();
+    // Waiting for the volume's preparation (the preload's, or this view's own) is not charged
+    // to the frame's deadline: a 1025^3 volume takes longer to prepare than the default 30 s.
+    // The preparation is bounded by the loader's limits instead, and a client that gives up
+    // meanwhile still cancels the frame (checked below).
+    const Clock::time_point deadline_from = received + (Clock::now() - asked);
     if (cancel->load()) {  // superseded while the volume was being prepared
       core_->counters.frames_cancelled.fetch_add(1);
       return absl::CancelledError("superseded");
@@ -327,7 +333,7 @@ class ChunkStream : public Reactor, public StreamBase {
     // views, when their own frames need the memory).
     std::lock_guard<std::mutex> using_retained(retained_.mutex());
     return core_->producer.Run(**volume, view, request, generation, cancel, this, received,
-                               &coarse_hint_, &retained_);
+                               deadline_from, &coarse_hint_, &retained_);
   }
 
   ServiceCore* core_;

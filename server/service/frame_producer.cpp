@@ -82,8 +82,8 @@ absl::StatusOr<ExtractRequest> ToExtractRequest(const pb::ViewRequest& v, const 
 absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewRequest& view,
                                 const ExtractRequest& request, uint64_t generation,
                                 std::atomic<bool>* cancel, ChunkSink* sink,
-                                Clock::time_point received, CoarseHint* hint,
-                                RetainedFrame* retained) const {
+                                Clock::time_point received, Clock::time_point deadline_from,
+                                CoarseHint* hint, RetainedFrame* retained) const {
   const RetainedCut* same_mesh = retained ? retained->Find(volume, request) : nullptr;
   if (view.progressive() && same_mesh == nullptr) {
     const int64_t coarse = settings_.coarse_triangles;
@@ -110,8 +110,8 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
         c.budget = coarse;
       }
       ExtractStats stats;
-      ISOSTREAM_RETURN_IF_ERROR(
-          ProduceFrame(volume, view, c, true, generation, cancel, sink, received, &stats));
+      ISOSTREAM_RETURN_IF_ERROR(ProduceFrame(volume, view, c, true, generation, cancel, sink,
+                                             received, deadline_from, &stats));
       if (hint) {
         hint->volume = view.volume();
         hint->isovalues = request.isovalues;
@@ -122,18 +122,19 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
     }
   }
   ExtractStats stats;
-  return ProduceFrame(volume, view, request, false, generation, cancel, sink, received, &stats,
-                      retained, same_mesh);
+  return ProduceFrame(volume, view, request, false, generation, cancel, sink, received,
+                      deadline_from, &stats, retained, same_mesh);
 }
 
 absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
                                          const ExtractRequest& request, bool coarse,
                                          uint64_t generation, std::atomic<bool>* cancel,
                                          ChunkSink* sink, Clock::time_point received,
-                                         ExtractStats* stats_out, RetainedFrame* retained,
+                                         Clock::time_point deadline_from, ExtractStats* stats_out,
+                                         RetainedFrame* retained,
                                          const RetainedCut* same_mesh) const {
   counters_->frames_started.fetch_add(1);
-  const auto deadline = received + std::chrono::milliseconds(settings_.deadline_ms);
+  const auto deadline = deadline_from + std::chrono::milliseconds(settings_.deadline_ms);
   const bool raw = view.codec() == pb::RAW;
   const size_t max_chunk = size_t(raw ? std::min(settings_.chunk_triangles, kMaxRawChunkTriangles)
                                       : settings_.chunk_triangles);

@@ -88,16 +88,21 @@ class FrameProducer {
   // of the mesh it holds is re-ordered from it (no coarse frame first: the refined one comes as
   // quickly); a refined frame of another mesh is recorded into it in its place, unless the
   // stream is sliding through meshes (retained_frame.h says when, and when it is freed).
+  // `received` is when the view was read (FrameStats.frame_ms counts from it); the deadline
+  // runs from `deadline_from`, which is later by the time the view waited for its volume to
+  // be prepared: preparing a 1025^3 volume takes 36-49 s, and is no frame's work.
   absl::Status Run(const ServedVolume& volume, const pb::ViewRequest& view,
                    const ExtractRequest& request, uint64_t generation, std::atomic<bool>* cancel,
                    ChunkSink* sink, std::chrono::steady_clock::time_point received,
-                   CoarseHint* hint = nullptr, RetainedFrame* retained = nullptr) const;
+                   std::chrono::steady_clock::time_point deadline_from, CoarseHint* hint = nullptr,
+                   RetainedFrame* retained = nullptr) const;
 
  private:
   absl::Status ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
                             const ExtractRequest& request, bool coarse, uint64_t generation,
                             std::atomic<bool>* cancel, ChunkSink* sink,
                             std::chrono::steady_clock::time_point received,
+                            std::chrono::steady_clock::time_point deadline_from,
                             ExtractStats* stats_out, RetainedFrame* retained = nullptr,
                             const RetainedCut* same_mesh = nullptr) const;
 

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <vector>
 
 namespace isostream::service {
@@ -18,6 +19,8 @@ ServiceCore::ServiceCore(const DaemonConfig& c)
         if (!c.no_cache) o.cache.dir = c.cache_dir.empty() ? DefaultCacheDir() : c.cache_dir;
         o.cache.max_bytes = uint64_t(c.cache_max_mb) << 20;
         o.build_threads = c.threads;
+        if (const char* ms = std::getenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS"))
+          o.prepare_delay = std::chrono::milliseconds(std::atoll(ms));
         return o;
       }()),
       encoders(std::make_unique<WorkerPool>(

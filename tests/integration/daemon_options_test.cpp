@@ -231,6 +231,31 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
+// A view asked for while its volume is still being prepared (here the preload, slowed to
+// 1.5 s by the test hook) gets its frame: the frame deadline (0.5 s) runs from when the
+// volume is ready, not from the request (a 1025^3 volume took 36-49 s to prepare, and every
+// first view during the preload failed with DEADLINE_EXCEEDED).
+TEST(SlowPreparation, IsNotChargedToTheFrameDeadline) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  setenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS", "1500", 1);
+  const bool started =
+      daemon.Start({"--volume", "ball=buckyball:33", "--deadline-ms", "500", "--no-cache"},
+                   dir.path() + "/isostreamd.log");
+  unsetenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS");
+  ASSERT_TRUE(started);
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  auto frame = (*c)->Fetch(MakeView("ball", 1, 0.01, glm::dvec3(2, 2, 2)));
+  ASSERT_TRUE(frame.ok()) << frame.status() << "\n" << DaemonLog(dir);
+  EXPECT_GT(frame->mesh.triangle_count(), 0u);
+  // frame_ms still counts from the request, preparation included.
+  EXPECT_GE(frame->stats.frame_ms(), 500);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
   // A frame too big for the transport's buffers (raw, flat normals: ~85 bytes per triangle,
   // ~690k triangles), read by a client that stops after the first chunk until the checks

@@ -277,8 +277,8 @@ TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
   ASSERT_TRUE(request.ok()) << request.status();
   std::atomic<bool> cancel{false};
   StuckSink sink;
-  const absl::Status s =
-      producer.Run(**volume, view, *request, 1, &cancel, &sink, std::chrono::steady_clock::now());
+  const auto now = std::chrono::steady_clock::now();
+  const absl::Status s = producer.Run(**volume, view, *request, 1, &cancel, &sink, now, now);
   EXPECT_EQ(s.code(), absl::StatusCode::kDeadlineExceeded) << s;
   EXPECT_LE(sink.chunks_.size(), 4u);  // never more than max_queued_chunks held
   for (size_t i = 0; i < sink.chunks_.size(); ++i) EXPECT_EQ(sink.chunks_[i].chunk_index(), i);
@@ -305,9 +305,8 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   ASSERT_TRUE(request.ok());
   std::atomic<bool> cancel{false};
   StuckSink sink;
-  ASSERT_TRUE(
-      producer.Run(**volume, view, *request, 1, &cancel, &sink, std::chrono::steady_clock::now())
-          .ok());
+  const auto now = std::chrono::steady_clock::now();
+  ASSERT_TRUE(producer.Run(**volume, view, *request, 1, &cancel, &sink, now, now).ok());
   auto direct =
       Extract(*(*volume)->prepared.hierarchy, (*volume)->prepared.grid_to_world, *request);
   ASSERT_TRUE(direct.ok());
