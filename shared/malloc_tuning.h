@@ -1,4 +1,6 @@
-// Process-wide allocator setting for programs that extract frame after frame.
+// Process-wide allocator setting for programs that extract frame after frame (isostreamd) or
+// decode chunk after chunk (isostream fetch, isostream-view: each chunk's decode buffers are a
+// few hundred KB, which glibc would otherwise map and unmap per chunk).
 //
 // A 1 M-triangle frame's mesh is ~25 MB in a few large vectors. By default glibc serves such
 // blocks with mmap and returns them with munmap, so every frame faults in fresh zeroed pages

@@ -31,6 +31,7 @@
 #include "client/view/window_view.h"
 #include "shared/file_io.h"
 #include "shared/given_number.h"
+#include "shared/malloc_tuning.h"
 #include "shared/number_list.h"
 
 namespace isostream::view {
@@ -366,6 +367,7 @@ int Run(const Args& args) {
 }  // namespace isostream::view
 
 int main(int argc, char** argv) {
+  isostream::KeepFreedMemoryForReuse();  // each chunk's decode buffers reuse the last one's
   isostream::view::Args args;
   CLI::App app{
       "isostream-view: draw isostreamd's view-ordered transparent isosurfaces (headless, PNG)"};

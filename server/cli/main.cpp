@@ -4,8 +4,11 @@
 
 #include "server/cli/commands.h"
 #include "shared/file_io.h"
+#include "shared/malloc_tuning.h"
 
 int main(int argc, char** argv) {
+  // fetch decodes chunk after chunk, extract fills subtree buffers: both reuse freed memory.
+  isostream::KeepFreedMemoryForReuse();
   CLI::App app{"isostream: multiresolution transparent isosurfaces (Gerstner's method)"};
   app.require_subcommand(1);
   int exit_code = 0;

@@ -342,9 +342,14 @@ absl::Status Append(const DecodedChunk& chunk, OrderedMesh* append_to) {
   } else {
     append_to->normals.resize(append_to->positions.size(), 0.0f);
   }
-  append_to->triangles.reserve(append_to->triangles.size() + chunk.triangles.size());
-  for (uint32_t index : chunk.triangles)
-    append_to->triangles.push_back(static_cast<uint32_t>(offset + index));
+  // resize, not reserve: reserve allocates exactly what is asked, so a frame's index array was
+  // reallocated and copied whole at every chunk (~11 k page faults per 64 k-triangle chunk of a
+  // 6.9 M-triangle frame), where resize grows it geometrically.
+  const size_t first = append_to->triangles.size();
+  append_to->triangles.resize(first + chunk.triangles.size());
+  uint32_t* out = append_to->triangles.data() + first;
+  for (size_t i = 0; i < chunk.triangles.size(); ++i)
+    out[i] = static_cast<uint32_t>(offset + chunk.triangles[i]);
   append_to->surface.insert(append_to->surface.end(), chunk.triangle_surface.begin(),
                             chunk.triangle_surface.end());
   return absl::OkStatus();
