@@ -22,7 +22,8 @@ inline void KeepFreedMemoryForReuse() {
 
 // Gives the heap's free pages back to the system now: after a rare event that freed much more
 // than frames reuse (a volume's grid once its hierarchy is built: 540 MB at 513^3, in 2 KB
-// leaves). The next frame faults its buffers in again once (~10 ms).
+// leaves; or whatever a preparation that failed had made). The next frame faults its buffers in
+// again once (~10 ms).
 inline void ReturnFreedMemory() { malloc_trim(0); }
 
 }  // namespace isostream
