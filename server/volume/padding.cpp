@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 #include <exception>
 #include <new>
@@ -19,6 +20,19 @@ namespace {
 constexpr int kMaxHierarchyLevel = 12;
 // Leaf buffers are z fastest: consecutive x are a plane of the leaf apart.
 constexpr int kLeafXStride = FloatLeaf::DIM * FloatLeaf::DIM;
+
+// The cube is the one allocation padding makes, and the one that can be huge (a 2049-sample
+// axis makes it 2049^3 floats, 32 GiB): its failure says how much was asked for.
+absl::Status OutOfMemory(const std::string& where, int n) {
+  const double bytes = double(n) * n * n * sizeof(float);
+  char size[32];
+  if (bytes >= double(1 << 30))
+    std::snprintf(size, sizeof(size), "%.1f GiB", bytes / double(1 << 30));
+  else
+    std::snprintf(size, sizeof(size), "%.0f MiB", bytes / double(1 << 20));
+  return absl::ResourceExhaustedError(where + ": out of memory for the " + std::to_string(n) +
+                                      "^3 cube (" + size + ")");
+}
 
 absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where) {
   const std::array<int, 3>& dims = volume.dims;
@@ -41,7 +55,11 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
   out.data_dims = dims;
   const int n = out.n;
   const size_t plane = static_cast<size_t>(n) * n;
-  out.values.resize(plane * n);
+  try {
+    out.values.resize(plane * n);
+  } catch (const std::bad_alloc&) {
+    return OutOfMemory(where, n);
+  }
   float* cube = out.values.data();
 
   // Copy the data box to the cube's origin corner, leaf block by leaf block.

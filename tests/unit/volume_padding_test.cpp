@@ -1,8 +1,13 @@
 // Padding to the hierarchy's (2^k+1)^3 cube: k, the data copied to the origin corner, and
 // edge replication everywhere else, for grids made of leaves, tiles and background.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <string>
 
 #include "server/volume/load.h"
 #include "server/volume/padding.h"
@@ -127,6 +132,31 @@ TEST(VolumePadding, RejectsBadVolumes) {
   p = PadToHierarchyDomain(*huge);
   EXPECT_EQ(p.status().code(), absl::StatusCode::kResourceExhausted) << p.status();
   EXPECT_NE(p.status().message().find("mixed"), std::string::npos) << p.status();
+}
+
+// A cube the process cannot allocate is a ResourceExhausted status that says which cube and
+// how many bytes (it said only "out of memory": a 2049x2x2 volume needs a 32 GiB cube). Run
+// in a child process whose address space is capped 32 MB above what it already uses; the
+// 300x2x2 volume pads to a 513^3 cube of 515 MiB.
+void PadUnderAddressSpaceCap(const Volume& volume) {
+  long pages = 0;
+  std::ifstream("/proc/self/statm") >> pages;
+  const rlim_t cap = rlim_t(pages) * rlim_t(sysconf(_SC_PAGESIZE)) + (rlim_t{32} << 20);
+  rlimit limit;
+  limit.rlim_cur = limit.rlim_max = cap;
+  if (setrlimit(RLIMIT_AS, &limit) != 0) std::_Exit(3);
+  const auto padded = PadToHierarchyDomain(volume);
+  const std::string message(padded.status().message());
+  std::fprintf(stderr, "%s\n", message.c_str());
+  std::_Exit(!padded.ok() && padded.status().code() == absl::StatusCode::kResourceExhausted ? 0
+                                                                                            : 1);
+}
+
+TEST(VolumePaddingDeathTest, OutOfMemorySaysTheCubeAndItsSize) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  VolumePtr v = MixedGrid({300, 2, 2}, openvdb::Coord(0));
+  EXPECT_EXIT(PadUnderAddressSpaceCap(*v), ::testing::ExitedWithCode(0),
+              "out of memory for the 513\\^3 cube \\(515 MiB\\)");
 }
 
 }  // namespace
