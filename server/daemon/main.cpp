@@ -200,6 +200,10 @@ int main(int argc, char** argv) {
       app.add_option("--token", token, "require 'authorization: Bearer TOKEN' on every call");
   auto* o_dim = app.add_option("--max-dim", max_dim,
                                "largest generator size served without a catalogue (default 257)");
+  int64_t generator_mb = 0;
+  auto* o_generator_mb = app.add_option("--generator-mb", generator_mb,
+                                        "memory for the generated volumes held at once; least "
+                                        "recently used idle ones go (default 8192)");
   auto* o_chunk =
       app.add_option("--chunk-triangles", chunk_triangles, "triangles per chunk (default 65536)");
   auto* o_retain = app.add_option("--retain-mb", retain_mb,
@@ -259,6 +263,7 @@ int main(int argc, char** argv) {
     config.token = token;
   }
   if (*o_dim) config.limits.max_dim = max_dim;
+  if (*o_generator_mb) config.limits.generator_mb = generator_mb;
   if (*o_chunk) config.chunk_triangles = chunk_triangles;
   if (*o_retain) config.retain_mb = retain_mb;
   if (*o_log) config.log_level = log_level;

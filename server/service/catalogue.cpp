@@ -7,6 +7,7 @@
 #include <cmath>
 #include <thread>
 
+#include "server/volume/padding.h"
 #include "shared/malloc_tuning.h"
 
 namespace isostream::service {
@@ -60,6 +61,17 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim) {
   return absl::OkStatus();
 }
 
+// What a generator volume's hierarchy store will take (Check has accepted the spec): nearly
+// all a prepared volume holds, known before preparing it.
+uint64_t GeneratorStoreBytes(const std::string& spec) {
+  const int n = std::stoi(spec.substr(spec.find(':') + 1));  // stops at a noise seed's ':'
+  const uint64_t cube = (uint64_t{1} << HierarchyLevelFor({n, n, n})) + 1;
+  const uint64_t bricks = (cube + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
+  return bricks * bricks * bricks * sizeof(HierarchyBrick);
+}
+
+std::string MiB(uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; }
+
 }  // namespace
 
 void QuantizationFor(const Volume& v, QuantizationBox* box, int* bits) {
@@ -99,10 +111,21 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     auto& e = entries_[name];
-    if (!e) e = std::make_shared<Entry>();
+    const bool added = !e;
+    if (added) {
+      e = std::make_shared<Entry>();
+      if (options_.volumes.empty()) e->store_bytes = GeneratorStoreBytes(name);
+    }
     e->last_use = ++use_clock_;
     entry = e;
-    if (options_.volumes.empty()) DropLeastRecentlyUsedLocked(name);
+    if (options_.volumes.empty()) {
+      // A volume already held or being prepared has its memory: only a new one can be refused.
+      const absl::Status room = MakeRoomLocked(name);
+      if (!room.ok() && added) {
+        entries_.erase(name);
+        return room;
+      }
+    }
   }
   std::lock_guard<std::mutex> build_lock(entry->build_mu);
   if (entry->served) return entry->served;
@@ -123,7 +146,13 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
     // The message names the spec, which the operator wrote: it stays in the log for catalogue
     // entries and is not shown to clients. Nor is its code: the client's request was right
     // (INVALID_ARGUMENT made the viewer call it an argument error).
-    if (options_.volumes.empty()) return prepared.status();
+    if (options_.volumes.empty()) {
+      // Nothing is held: its bytes must not keep other generated volumes out.
+      std::lock_guard<std::mutex> lock(mu_);
+      auto it = entries_.find(name);
+      if (it != entries_.end() && it->second == entry) entries_.erase(it);
+      return prepared.status();
+    }
     entry->failed = absl::FailedPreconditionError(
         "volume " + Quoted(name) + " could not be prepared on the daemon (see its log)");
     entry->failed_at = std::chrono::steady_clock::now();  // a slow failure gets its 30 s too
@@ -150,8 +179,21 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
   return entry->served;
 }
 
-void VolumeCatalogue::DropLeastRecentlyUsedLocked(const std::string& keep) {
-  while (entries_.size() > size_t(std::max(1, options_.max_generator_volumes))) {
+uint64_t VolumeCatalogue::HeldBytesLocked() const {
+  uint64_t bytes = 0;
+  for (const auto& [name, entry] : entries_) bytes += entry->store_bytes;
+  return bytes;
+}
+
+absl::Status VolumeCatalogue::MakeRoomLocked(const std::string& keep) {
+  const uint64_t budget = options_.max_generator_bytes;
+  const uint64_t needed = entries_.at(keep)->store_bytes;
+  if (needed > budget)  // refused before anything is dropped for it
+    return absl::ResourceExhaustedError(
+        "volume " + Quoted(keep) + " needs " + MiB(needed) + ", more than the " + MiB(budget) +
+        " this daemon keeps for generated volumes: ask for a smaller one");
+  const size_t max_count = size_t(std::max(1, options_.max_generator_volumes));
+  while (entries_.size() > max_count || HeldBytesLocked() > budget) {
     // Entries being built are skipped (their build mutex is held): dropping one would let a
     // second request start a second build of the same volume.
     auto oldest = entries_.end();
@@ -161,12 +203,18 @@ void VolumeCatalogue::DropLeastRecentlyUsedLocked(const std::string& keep) {
       std::unique_lock<std::mutex> idle(it->second->build_mu, std::try_to_lock);
       if (idle.owns_lock()) oldest = it;
     }
-    if (oldest == entries_.end()) return;  // over the limit until a build ends
-    spdlog::info("dropping volume '{}' (least recently used of {} generator volumes)",
-                 oldest->first, entries_.size());
+    if (oldest == entries_.end()) break;
+    spdlog::info("dropping volume '{}' (least recently used of {} generator volumes, {} held)",
+                 oldest->first, entries_.size(), MiB(HeldBytesLocked()));
     // A build or frames in progress hold their own references; the memory goes when they end.
     entries_.erase(oldest);
   }
+  const uint64_t held = HeldBytesLocked();
+  if (held <= budget) return absl::OkStatus();  // over the count at most, until a build ends
+  const std::string others = MiB(held - needed) + " of the " + MiB(budget);
+  return absl::ResourceExhaustedError("volume " + Quoted(keep) + " needs " + MiB(needed) +
+                                      ", and generated volumes being prepared hold " + others +
+                                      " this daemon keeps for them: try again when they are ready");
 }
 
 int VolumeCatalogue::held_count() const {

@@ -47,9 +47,15 @@ struct CatalogueOptions {
   HierarchyCacheOptions cache;
   int build_threads = 0;
   // Generator volumes kept prepared at once (without a catalogue any client can name up to
-  // 5 x max_generator_dim of them, each up to 257^3 x 8 bytes): the least recently used is
-  // dropped beyond this. Frames in progress keep their volume alive until they end.
+  // 5 x max_generator_dim of them): at most this many, and stores (nearly all a prepared
+  // volume holds: 105 MiB at 257^3, 805 MiB at 513^3, 6.1 GiB at 1025^3) of at most
+  // max_generator_bytes together; a count alone let the clients of a --max-dim 1025 daemon make
+  // it hold 8 x 6.6 GB. The least recently used idle volumes are dropped to make room; a volume
+  // that does not fit even then (the others are being prepared, or it is larger than the
+  // budget) is refused with RESOURCE_EXHAUSTED. Frames in progress keep a dropped volume alive
+  // until they end, so the memory held can pass the budget for that long.
   int max_generator_volumes = 8;
+  uint64_t max_generator_bytes = uint64_t{8} << 30;
   // Test hook: every preparation first sleeps this long, so daemon tests can have a volume
   // that is slow to prepare without big data (isostreamd takes it from the environment
   // variable ISOSTREAMD_TEST_PREPARE_DELAY_MS).
@@ -84,6 +90,7 @@ class VolumeCatalogue {
   struct Entry {
     std::mutex build_mu;  // held while preparing, so one build per volume
     ServedVolumePtr served;
+    uint64_t store_bytes = 0;  // of a generator volume, known from its spec before preparing
     uint64_t last_use = 0;  // under the catalogue's mu_
     // A catalogue entry that failed to prepare: the answer until kRetryFailedAfter has passed,
     // so that clients asking again do not re-read a bad file and fill the log each time.
@@ -91,7 +98,11 @@ class VolumeCatalogue {
     std::chrono::steady_clock::time_point failed_at;
   };
   static constexpr std::chrono::seconds kRetryFailedAfter{30};
-  void DropLeastRecentlyUsedLocked(const std::string& keep);
+  // Drops idle generator volumes, least recently used first, until those left (`keep`
+  // included) are within max_generator_volumes and max_generator_bytes; RESOURCE_EXHAUSTED if
+  // `keep` cannot fit within the bytes.
+  absl::Status MakeRoomLocked(const std::string& keep);
+  uint64_t HeldBytesLocked() const;
   CatalogueOptions options_;
   mutable std::mutex mu_;
   std::map<std::string, std::shared_ptr<Entry>> entries_;

@@ -95,15 +95,17 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
   }
   if (j.contains("limits")) {
     const json& l = j["limits"];
-    ISOSTREAM_RETURN_IF_ERROR(CheckKeys(l,
-                                        {"max_sessions", "max_triangles", "max_isovalues",
-                                         "deadline_ms", "max_dim", "idle_timeout_s"},
-                                        "limits."));
+    ISOSTREAM_RETURN_IF_ERROR(
+        CheckKeys(l,
+                  {"max_sessions", "max_triangles", "max_isovalues", "deadline_ms", "max_dim",
+                   "generator_mb", "idle_timeout_s"},
+                  "limits."));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_sessions", "limits.", &c->limits.max_sessions));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_triangles", "limits.", &c->limits.max_triangles));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_isovalues", "limits.", &c->limits.max_isovalues));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "deadline_ms", "limits.", &c->limits.deadline_ms));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "max_dim", "limits.", &c->limits.max_dim));
+    ISOSTREAM_RETURN_IF_ERROR(Get(l, "generator_mb", "limits.", &c->limits.generator_mb));
     ISOSTREAM_RETURN_IF_ERROR(Get(l, "idle_timeout_s", "limits.", &c->limits.idle_timeout_s));
   }
   if (j.contains("frames")) {
@@ -176,6 +178,8 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   if (c.limits.deadline_ms < 1 || c.limits.deadline_ms > 86'400'000)
     return bad("deadline_ms must be in 1..86400000");
   if (c.limits.max_dim < 2 || c.limits.max_dim > 4097) return bad("max_dim must be in 2..4097");
+  if (c.limits.generator_mb < 1 || c.limits.generator_mb > (int64_t{1} << 30))
+    return bad("generator_mb must be in 1..1073741824");
   if (c.limits.idle_timeout_s < 0 || c.limits.idle_timeout_s > 7 * 86400)
     return bad("idle_timeout_s must be in 0 (off)..604800");
   if (c.tls_cert.empty() != c.tls_key.empty()) return bad("TLS needs both a certificate and a key");

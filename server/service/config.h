@@ -16,6 +16,9 @@ struct Limits {
   int max_isovalues = 16;
   int64_t deadline_ms = 30'000;  // per frame, extraction and encoding
   int max_dim = 257;             // samples per axis of a generator served without a catalogue
+  // Memory for the generated volumes held at once (their hierarchy stores: 105 MiB at 257^3,
+  // 6.1 GiB at 1025^3); catalogue.h says how it is kept.
+  int64_t generator_mb = 8192;
   // A Session with no view request and nothing in flight for this long is ended by the server
   // with DEADLINE_EXCEEDED, freeing its slot and memory; 0 = never.
   int64_t idle_timeout_s = 300;
@@ -67,7 +70,8 @@ int FirstChunkTriangles(const DaemonConfig& config);
 //    "volumes": {"head": "/data/head.nii.gz"}, "preload": true, "token": "...",
 //    "tls": {"cert": "server.pem", "key": "server.key"},
 //    "limits": {"max_sessions": 16, "max_triangles": 4000000, "max_isovalues": 16,
-//               "deadline_ms": 30000, "max_dim": 257, "idle_timeout_s": 300},
+//               "deadline_ms": 30000, "max_dim": 257, "generator_mb": 8192,
+//               "idle_timeout_s": 300},
 //    "frames": {"chunk_triangles": 65536, "first_chunk_triangles": 8192,
 //               "coarse_triangles": 20000, "max_queued_chunks": 8, "retain_mb": 1024},
 //    "log_level": "info"}

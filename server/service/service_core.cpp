@@ -15,6 +15,7 @@ ServiceCore::ServiceCore(const DaemonConfig& c)
         CatalogueOptions o;
         o.volumes = c.volumes;
         o.max_generator_dim = c.limits.max_dim;
+        o.max_generator_bytes = uint64_t(c.limits.generator_mb) << 20;
         o.limits.max_dim = c.volumes.empty() ? c.limits.max_dim : VolumeLimits{}.max_dim;
         if (!c.no_cache) o.cache.dir = c.cache_dir.empty() ? DefaultCacheDir() : c.cache_dir;
         o.cache.max_bytes = uint64_t(c.cache_max_mb) << 20;

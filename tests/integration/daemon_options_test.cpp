@@ -518,6 +518,7 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
       {"--chunk-triangles 4096 --config " + default_first_chunk_config,
        "first_chunk_triangles must be in 256..chunk_triangles"},
       {"--max-sessions 2000000000", "max_sessions must be in 1..4096"},
+      {"--generator-mb 0", "generator_mb must be in 1..1073741824"},
       {"--token ''", "--token is empty"},
       {"--token \"$(printf 'a\\tb')\"", "token must be printable ASCII"},
       {"--bogus", "--bogus"}};

@@ -3,8 +3,10 @@
 // client explains failed calls.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <fstream>
 #include <mutex>
+#include <thread>
 
 #include "client/net/session_client.h"
 #include "server/service/catalogue.h"
@@ -141,6 +143,8 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
             std::string::npos);
   EXPECT_NE(message(R"({"limits": {"max_sessions": 2000000000}})").find("max_sessions"),
             std::string::npos);
+  EXPECT_NE(message(R"({"limits": {"generator_mb": 0}})").find("generator_mb"), std::string::npos);
+  EXPECT_EQ(message(R"({"limits": {"generator_mb": 100}})"), "");
   EXPECT_NE(message("{\"token\": \"caf\u00e9\"}").find("printable ASCII"), std::string::npos);
   EXPECT_EQ(message(R"({"token": "a b"})"), "");
   EXPECT_NE(message(R"({"token": ""})").find("'token' is empty"), std::string::npos);
@@ -220,6 +224,54 @@ TEST(Catalogue, KeepsABoundedNumberOfGeneratorVolumes) {
   EXPECT_EQ(again->get(), first->get());  // kept, not rebuilt
   ASSERT_TRUE(catalogue.Get("sphere:10").ok());
   EXPECT_EQ(catalogue.prepared_count(), 4);  // rebuilt after being dropped
+}
+
+// Generated volumes are bounded by their memory too: the count alone (8) let the clients of a
+// --max-dim 1025 daemon make it hold 8 x 6.6 GB. A 33^3 volume's store is 384,000 bytes, a
+// 17^3 one's 82,944, a 65^3 one's 2,239,488.
+TEST(Catalogue, KeepsGeneratorVolumesWithinAByteBudget) {
+  CatalogueOptions o;
+  o.max_generator_bytes = 1'000'000;  // two 33^3 volumes, not three
+  VolumeCatalogue catalogue(o);
+  auto first = catalogue.Get("sphere:33");
+  ASSERT_TRUE(first.ok());
+  ASSERT_TRUE(catalogue.Get("cayley:33").ok());
+  ASSERT_TRUE(catalogue.Get("sphere:33").ok());  // now the most recent
+  ASSERT_TRUE(catalogue.Get("noise:33").ok());   // drops cayley:33
+  EXPECT_EQ(catalogue.held_count(), 2);
+  auto again = catalogue.Get("sphere:33");
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->get(), first->get());  // kept, not rebuilt
+  EXPECT_EQ(catalogue.prepared_count(), 3);
+  ASSERT_TRUE(catalogue.Get("sphere:17").ok());  // a small one fits beside them
+  EXPECT_EQ(catalogue.held_count(), 3);
+  // One past the whole budget is refused, and nothing is dropped for it.
+  auto big = catalogue.Get("sphere:65");
+  EXPECT_EQ(big.status().code(), absl::StatusCode::kResourceExhausted) << big.status();
+  EXPECT_NE(big.status().message().find("'sphere:65' needs 3 MiB, more than the 1 MiB"),
+            std::string::npos)
+      << big.status();
+  EXPECT_EQ(catalogue.held_count(), 3);
+  EXPECT_EQ(catalogue.prepared_count(), 4);
+}
+
+// Volumes being prepared cannot be dropped: one that does not fit beside them is refused until
+// they are ready (the hook slows each preparation to 400 ms).
+TEST(Catalogue, RefusesAGeneratorVolumeThatOthersBeingPreparedLeaveNoRoomFor) {
+  CatalogueOptions o;
+  o.max_generator_bytes = 1'000'000;
+  o.prepare_delay = std::chrono::milliseconds(400);
+  VolumeCatalogue catalogue(o);
+  std::thread a([&] { EXPECT_TRUE(catalogue.Get("sphere:33").ok()); });
+  std::thread b([&] { EXPECT_TRUE(catalogue.Get("cayley:33").ok()); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  auto refused = catalogue.Get("noise:33");
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kResourceExhausted) << refused.status();
+  EXPECT_NE(refused.status().message().find("try again"), std::string::npos) << refused.status();
+  a.join();
+  b.join();
+  EXPECT_TRUE(catalogue.Get("noise:33").ok());  // drops the least recently used now
+  EXPECT_EQ(catalogue.held_count(), 2);
 }
 
 TEST(Quantization, AtMostOneSixtyFourthVoxel) {
