@@ -457,55 +457,58 @@ absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
 
 // An allocation that fails (the store, the large one; or any small one of a process at its
 // memory limit) is a ResourceExhausted status for the caller, not a throw.
-absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
-                                               const UninitializedVector<uint16_t>& eta_codes) try {
+absl::StatusOr<HierarchyPtr> AssembleHierarchy(const PaddedSamples& samples,
+                                               const EtaCodeSlabs& read_eta_codes) try {
   auto h = std::make_shared<Hierarchy>();
   ISOSTREAM_RETURN_IF_ERROR(h->SetUpStore(samples));
-  if (eta_codes.size() != samples.values.size())
-    return absl::InvalidArgumentError("hierarchy: eta size does not match the samples");
-  // Fill brick by brick (each written once, whole, by one thread, which also first-touches
-  // its pages). Points of partial bricks beyond the cube are never read; they get zeros so
-  // the store is deterministic.
+  // Fill one layer of bricks (8 planes) at a time, brick by brick (each written once, whole,
+  // by one thread, which also first-touches its pages). Points of partial bricks beyond the
+  // cube are never read; they get zeros so the store is deterministic.
   const size_t n = static_cast<size_t>(samples.n);
   const size_t nb = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
   constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
   HierarchyBrick* bricks = h->bricks_.data();
   const int cube = samples.n;
-  tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, nb * nb), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t zy = r.begin(); zy != r.end(); ++zy) {
-          const int bz = int(zy / nb), by = int(zy % nb);
-          for (size_t bx = 0; bx < nb; ++bx) {
-            HierarchyBrick& brick = bricks[zy * nb + bx];
-            for (int lz = 0; lz <= m; ++lz)
-              for (int ly = 0; ly <= m; ++ly) {
-                const int z = (bz << b) + lz, y = (by << b) + ly, x0 = int(bx << b);
-                const int local = HierarchyBrick::Local(2, lz) + HierarchyBrick::Local(1, ly);
-                const int inside =
-                    z < cube && y < cube ? std::max(0, std::min(m + 1, cube - x0)) : 0;
-                const size_t row = (size_t(z) * n + y) * n + x0;
-                if (inside == m + 1) {
-                  // A whole row (all but the cube's last): unrolled, the x placements are
-                  // constants (~1 G instructions less at 513^3 than computing each).
+  UninitializedVector<uint16_t> slab(size_t(m + 1) * n * n);
+  for (size_t bz = 0; bz < nb; ++bz) {
+    const int z_begin = int(bz << b), z_end = std::min(cube, z_begin + m + 1);
+    if (!read_eta_codes(z_begin, z_end, slab.data()))
+      return absl::DataLossError("hierarchy: the eta codes of planes " + std::to_string(z_begin) +
+                                 ".." + std::to_string(z_end - 1) + " could not be read");
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nb), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t by = r.begin(); by != r.end(); ++by) {
+        for (size_t bx = 0; bx < nb; ++bx) {
+          HierarchyBrick& brick = bricks[(bz * nb + by) * nb + bx];
+          for (int lz = 0; lz <= m; ++lz)
+            for (int ly = 0; ly <= m; ++ly) {
+              const int z = z_begin + lz, y = int(by << b) + ly, x0 = int(bx << b);
+              const int local = HierarchyBrick::Local(2, lz) + HierarchyBrick::Local(1, ly);
+              const int inside = z < cube && y < cube ? std::max(0, std::min(m + 1, cube - x0)) : 0;
+              const size_t row = (size_t(z) * n + y) * n + x0;
+              const size_t slab_row = (size_t(lz) * n + y) * n + x0;
+              if (inside == m + 1) {
+                // A whole row (all but the cube's last): unrolled, the x placements are
+                // constants (~1 G instructions less at 513^3 than computing each).
 #pragma GCC unroll 8
-                  for (int lx = 0; lx <= m; ++lx) {
-                    brick.value[local + HierarchyBrick::Local(0, lx)] = samples.values[row + lx];
-                    brick.eta[local + HierarchyBrick::Local(0, lx)] = eta_codes[row + lx];
-                  }
-                  continue;
-                }
-                for (int lx = 0; lx < inside; ++lx) {
+                for (int lx = 0; lx <= m; ++lx) {
                   brick.value[local + HierarchyBrick::Local(0, lx)] = samples.values[row + lx];
-                  brick.eta[local + HierarchyBrick::Local(0, lx)] = eta_codes[row + lx];
+                  brick.eta[local + HierarchyBrick::Local(0, lx)] = slab[slab_row + lx];
                 }
-                for (int lx = inside; lx <= m; ++lx) {
-                  brick.value[local + HierarchyBrick::Local(0, lx)] = 0.0f;
-                  brick.eta[local + HierarchyBrick::Local(0, lx)] = 0;
-                }
+                continue;
               }
-          }
+              for (int lx = 0; lx < inside; ++lx) {
+                brick.value[local + HierarchyBrick::Local(0, lx)] = samples.values[row + lx];
+                brick.eta[local + HierarchyBrick::Local(0, lx)] = slab[slab_row + lx];
+              }
+              for (int lx = inside; lx <= m; ++lx) {
+                brick.value[local + HierarchyBrick::Local(0, lx)] = 0.0f;
+                brick.eta[local + HierarchyBrick::Local(0, lx)] = 0;
+              }
+            }
         }
-      });
+      }
+    });
+  }
   return HierarchyPtr(std::move(h));
 } catch (const std::bad_alloc&) {
   return OutOfMemory(samples.n);

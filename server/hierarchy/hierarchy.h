@@ -73,6 +73,11 @@ struct HierarchyBrick {
 
 struct HierarchyBuildOptions;
 
+// Where AssembleHierarchy gets the eta codes of a previous build: writes those of the points
+// with z in [z_begin, z_end) to `codes`, linear (x fastest, n^2 per plane), and returns true;
+// false if they cannot be had (a truncated file).
+using EtaCodeSlabs = std::function<bool(int z_begin, int z_end, uint16_t* codes)>;
+
 class Hierarchy {
  public:
   int k() const { return k_; }
@@ -115,7 +120,7 @@ class Hierarchy {
   friend absl::StatusOr<std::shared_ptr<const Hierarchy>> BuildHierarchy(
       PaddedSamples samples, const HierarchyBuildOptions& options);
   friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(
-      PaddedSamples samples, const UninitializedVector<uint16_t>& eta_codes);
+      const PaddedSamples& samples, const EtaCodeSlabs& read_eta_codes);
   // Checks the cube's shape, sets the sizes and offset tables, allocates (does not fill) the
   // bricks.
   absl::Status SetUpStore(const PaddedSamples& samples);
@@ -147,8 +152,10 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options = {});
 
 // Builds the hierarchy's store from linear samples and the linear bfloat16 eta codes of a
-// previous build (Hierarchy::LinearEtaCodes, as kept by the on-disk cache). Sizes must match.
-absl::StatusOr<HierarchyPtr> AssembleHierarchy(PaddedSamples samples,
-                                               const UninitializedVector<uint16_t>& eta_codes);
+// previous build (Hierarchy::LinearEtaCodes, as kept by the on-disk cache), asked for 8 planes
+// at a time: the whole cube's codes are never held beside the samples and the store (at
+// 1025^3 they were 2.15 GB more than a build's peak). DATA_LOSS if `read_eta_codes` fails.
+absl::StatusOr<HierarchyPtr> AssembleHierarchy(const PaddedSamples& samples,
+                                               const EtaCodeSlabs& read_eta_codes);
 
 }  // namespace isostream

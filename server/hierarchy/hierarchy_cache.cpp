@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <vector>
 
 namespace isostream {
@@ -41,16 +42,18 @@ uint64_t SamplesHash(const PaddedSamples& s) {
   return h;
 }
 
-// Reads the cached eta (bfloat16 codes, linear), or explains why it cannot be used.
-bool ReadCache(const std::string& path, const PaddedSamples& s, uint64_t samples_hash,
-               UninitializedVector<uint16_t>* eta, std::string* why) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
+// Opens a cache entry and checks its header against the samples: on success `in` is at the
+// payload (the eta codes, linear) and `eta_hash` is their checksum; otherwise `why` says why
+// the entry cannot be used.
+bool OpenCache(const std::string& path, const PaddedSamples& s, uint64_t samples_hash,
+               std::ifstream* in, uint64_t* eta_hash, std::string* why) {
+  in->open(path, std::ios::binary);
+  if (!*in) {
     *why = "no cache entry";
     return false;
   }
   Header h{};
-  if (!in.read(reinterpret_cast<char*>(&h), sizeof(h))) {
+  if (!in->read(reinterpret_cast<char*>(&h), sizeof(h))) {
     *why = "cache header truncated";
     return false;
   }
@@ -69,16 +72,36 @@ bool ReadCache(const std::string& path, const PaddedSamples& s, uint64_t samples
     *why = "cache entry is stale (samples changed)";
     return false;
   }
-  eta->resize(count);
-  if (!in.read(reinterpret_cast<char*>(eta->data()), count * sizeof(uint16_t))) {
-    *why = "cache payload truncated";
-    return false;
-  }
-  if (XXH3_64bits(eta->data(), count * sizeof(uint16_t)) != h.eta_hash) {
-    *why = "cache payload fails its checksum";
-    return false;
-  }
+  *eta_hash = h.eta_hash;
   return true;
+}
+
+// The hierarchy from a cache entry's payload, read straight into its store (AssembleHierarchy)
+// and checked against `eta_hash` as it goes. Null with `why` set if the payload is short or
+// fails its checksum (the caller rebuilds); an error only for what a rebuild would meet too
+// (out of memory).
+absl::StatusOr<HierarchyPtr> ReadCache(std::ifstream* in, const PaddedSamples& s, uint64_t eta_hash,
+                                       std::string* why) {
+  std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> hash(XXH3_createState(),
+                                                                &XXH3_freeState);
+  if (!hash) return absl::ResourceExhaustedError("hierarchy cache: out of memory");
+  XXH3_64bits_reset(hash.get());
+  const size_t plane = static_cast<size_t>(s.n) * s.n;
+  auto h = AssembleHierarchy(s, [&](int z_begin, int z_end, uint16_t* codes) {
+    const size_t bytes = size_t(z_end - z_begin) * plane * sizeof(uint16_t);
+    if (!in->read(reinterpret_cast<char*>(codes), std::streamsize(bytes))) return false;
+    XXH3_64bits_update(hash.get(), codes, bytes);
+    return true;
+  });
+  if (!h.ok() && h.status().code() == absl::StatusCode::kDataLoss) {
+    *why = "cache payload truncated";
+    return HierarchyPtr();
+  }
+  if (h.ok() && XXH3_64bits_digest(hash.get()) != eta_hash) {
+    *why = "cache payload fails its checksum";
+    return HierarchyPtr();
+  }
+  return h;
 }
 
 bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples_hash,
@@ -215,14 +238,19 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   }
   const uint64_t hash = SamplesHash(samples);
   const std::string path = PathFor(cache.dir, samples.k, hash);
-  UninitializedVector<uint16_t> eta;
-  if (ReadCache(path, samples, hash, &eta, &reason)) {
-    std::error_code ec;  // a hit is a use: the eviction order is by this time
-    std::filesystem::last_write_time(path, std::filesystem::file_time_type::clock::now(), ec);
-    if (outcome) *outcome = CacheOutcome::kHit;
-    if (why) *why = "loaded " + path;
-    return AssembleHierarchy(std::move(samples), eta);
+  std::ifstream in;
+  uint64_t eta_hash = 0;
+  if (OpenCache(path, samples, hash, &in, &eta_hash, &reason)) {
+    ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr read, ReadCache(&in, samples, eta_hash, &reason));
+    if (read) {
+      std::error_code ec;  // a hit is a use: the eviction order is by this time
+      std::filesystem::last_write_time(path, std::filesystem::file_time_type::clock::now(), ec);
+      if (outcome) *outcome = CacheOutcome::kHit;
+      if (why) *why = "loaded " + path;
+      return read;
+    }
   }
+  in.close();
   result = std::filesystem::exists(path) ? CacheOutcome::kInvalidRebuilt : CacheOutcome::kMissBuilt;
   ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built, BuildHierarchy(std::move(samples), build));
   std::string write_why;

@@ -3,6 +3,7 @@
 #include "server/hierarchy/hierarchy_cache.h"
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -171,6 +172,31 @@ TEST_F(HierarchyCacheTest, UnwritableDirectoryStillBuilds) {
   auto h = LoadOrBuildHierarchy(Samples(3, 0), cache_, {}, &outcome, &why);
   ASSERT_TRUE(h.ok());
   EXPECT_NE(why.find("cannot"), std::string::npos) << why;
+}
+
+// A hit reads the cached codes straight into the store: it needs no more memory than a build
+// (the whole linear eta beside the samples and the store was 2.15 GB more at 1025^3). Run in a
+// child process whose address space is capped at what it uses plus the 257^3 store (110 MB)
+// and 16 MB: the 257^3 codes alone are 34 MB.
+void HitUnderAddressSpaceCap(PaddedSamples samples, HierarchyCacheOptions cache) {
+  long pages = 0;
+  std::ifstream("/proc/self/statm") >> pages;
+  const rlim_t store = rlim_t{33} * 33 * 33 * sizeof(HierarchyBrick);
+  const rlim_t cap = rlim_t(pages) * rlim_t(sysconf(_SC_PAGESIZE)) + store + (rlim_t{16} << 20);
+  rlimit limit;
+  limit.rlim_cur = limit.rlim_max = cap;
+  if (setrlimit(RLIMIT_AS, &limit) != 0) std::_Exit(3);
+  CacheOutcome outcome;
+  const auto h = LoadOrBuildHierarchy(std::move(samples), cache, {}, &outcome);
+  std::_Exit(h.ok() && outcome == CacheOutcome::kHit ? 0 : 1);
+}
+
+TEST_F(HierarchyCacheTest, HitNeedsNoMoreMemoryThanTheStore) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  CacheOutcome outcome;
+  const HierarchyPtr built = Get(Samples(8, 0), &outcome);
+  ASSERT_EQ(built->total_bytes(), 33u * 33 * 33 * sizeof(HierarchyBrick));
+  EXPECT_EXIT(HitUnderAddressSpaceCap(Samples(8, 0), cache_), ::testing::ExitedWithCode(0), "");
 }
 
 }  // namespace
