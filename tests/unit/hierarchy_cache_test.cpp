@@ -3,14 +3,14 @@
 #include "server/hierarchy/hierarchy_cache.h"
 
 #include <gtest/gtest.h>
-#include <sys/resource.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+
+#include "address_space_cap.h"
 
 namespace isostream {
 namespace {
@@ -179,13 +179,8 @@ TEST_F(HierarchyCacheTest, UnwritableDirectoryStillBuilds) {
 // child process whose address space is capped at what it uses plus the 257^3 store (110 MB)
 // and 16 MB: the 257^3 codes alone are 34 MB.
 void HitUnderAddressSpaceCap(PaddedSamples samples, HierarchyCacheOptions cache) {
-  long pages = 0;
-  std::ifstream("/proc/self/statm") >> pages;
   const rlim_t store = rlim_t{33} * 33 * 33 * sizeof(HierarchyBrick);
-  const rlim_t cap = rlim_t(pages) * rlim_t(sysconf(_SC_PAGESIZE)) + store + (rlim_t{16} << 20);
-  rlimit limit;
-  limit.rlim_cur = limit.rlim_max = cap;
-  if (setrlimit(RLIMIT_AS, &limit) != 0) std::_Exit(3);
+  testing::CapAddressSpaceAbove(store + (rlim_t{16} << 20));
   CacheOutcome outcome;
   const auto h = LoadOrBuildHierarchy(std::move(samples), cache, {}, &outcome);
   std::_Exit(h.ok() && outcome == CacheOutcome::kHit ? 0 : 1);

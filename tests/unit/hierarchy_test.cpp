@@ -3,11 +3,8 @@
 #include "server/hierarchy/hierarchy.h"
 
 #include <gtest/gtest.h>
-#include <sys/resource.h>
-#include <unistd.h>
 
 #include <cmath>
-#include <fstream>
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
@@ -16,6 +13,7 @@
 #include <set>
 #include <tuple>
 
+#include "address_space_cap.h"
 #include "server/hierarchy/refinement_vertex.h"
 #include "test_volumes.h"
 #include "tree_walk.h"
@@ -390,12 +388,7 @@ TEST(Hierarchy, RejectsNonFiniteSamplesAndBadShapes) {
 // throw past the caller (the CLI and the daemon report it and go on). Run in a child process
 // whose address space is capped 32 MB above what it already uses: the 257^3 store needs 100 MB.
 void BuildUnderAddressSpaceCap(PaddedSamples s) {
-  long pages = 0;
-  std::ifstream("/proc/self/statm") >> pages;
-  const rlim_t cap = rlim_t(pages) * rlim_t(sysconf(_SC_PAGESIZE)) + (rlim_t{32} << 20);
-  rlimit limit;
-  limit.rlim_cur = limit.rlim_max = cap;
-  if (setrlimit(RLIMIT_AS, &limit) != 0) std::_Exit(3);
+  testing::CapAddressSpaceAbove(rlim_t{32} << 20);
   const auto h = BuildHierarchy(std::move(s));
   const bool ok = !h.ok() && h.status().code() == absl::StatusCode::kResourceExhausted &&
                   h.status().message().find("257^3") != std::string::npos;

@@ -1,14 +1,12 @@
 // Padding to the hierarchy's (2^k+1)^3 cube: k, the data copied to the origin corner, and
 // edge replication everywhere else, for grids made of leaves, tiles and background.
 #include <gtest/gtest.h>
-#include <sys/resource.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
-#include <fstream>
 #include <string>
 
+#include "address_space_cap.h"
 #include "server/volume/load.h"
 #include "server/volume/padding.h"
 
@@ -139,12 +137,7 @@ TEST(VolumePadding, RejectsBadVolumes) {
 // in a child process whose address space is capped 32 MB above what it already uses; the
 // 300x2x2 volume pads to a 513^3 cube of 515 MiB.
 void PadUnderAddressSpaceCap(const Volume& volume) {
-  long pages = 0;
-  std::ifstream("/proc/self/statm") >> pages;
-  const rlim_t cap = rlim_t(pages) * rlim_t(sysconf(_SC_PAGESIZE)) + (rlim_t{32} << 20);
-  rlimit limit;
-  limit.rlim_cur = limit.rlim_max = cap;
-  if (setrlimit(RLIMIT_AS, &limit) != 0) std::_Exit(3);
+  testing::CapAddressSpaceAbove(rlim_t{32} << 20);
   const auto padded = PadToHierarchyDomain(volume);
   const std::string message(padded.status().message());
   std::fprintf(stderr, "%s\n", message.c_str());
