@@ -256,6 +256,43 @@ TEST(SlowPreparation, IsNotChargedToTheFrameDeadline) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
+// A view that supersedes one waiting for a preparation is not charged the rest of that wait
+// either: it was (view 2, read 0.5 s into a 1.5 s preparation, ended the session with
+// DEADLINE_EXCEEDED under a 0.5 s deadline), whether it asked for the volume being prepared or
+// another one already prepared.
+TEST(SlowPreparation, IsNotChargedToAViewThatSupersedesAWaitingOne) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  setenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS", "1500", 1);
+  const bool started =
+      daemon.Start({"--volume", "a=buckyball:33", "--volume", "b=buckyball:17", "--volume",
+                    "c=buckyball:21", "--deadline-ms", "500", "--no-cache", "--no-preload"},
+                   dir.path() + "/isostreamd.log");
+  unsetenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS");
+  ASSERT_TRUE(started);
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  auto warm = (*c)->Fetch(MakeView("b", 1, 0.01, glm::dvec3(2, 2, 2)));  // b: prepared now
+  ASSERT_TRUE(warm.ok()) << warm.status() << "\n" << DaemonLog(dir);
+  // {volume being prepared for view 1, volume of view 2}.
+  for (const auto& [waiting, second] : {std::pair<std::string, std::string>{"a", "a"}, {"c", "b"}}) {
+    auto session = (*c)->OpenSession();
+    ASSERT_TRUE(session.ok());
+    ASSERT_TRUE((*session)->Send(MakeView(waiting, 2, 0.01, glm::dvec3(2, 2, 2))).ok());
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    ASSERT_TRUE((*session)->Send(MakeView(second, 3, 0.01, glm::dvec3(2, 2, 3))).ok());
+    net::Frame frame;
+    ASSERT_TRUE(ReadFrame(**session, &frame))
+        << second << ": " << (*session)->Finish() << "\n" << DaemonLog(dir);
+    EXPECT_EQ(frame.id, 3u) << second;
+    EXPECT_GT(frame.mesh.triangle_count(), 0u) << second;
+    ASSERT_TRUE((*session)->CloseSend().ok());
+  }
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
   // A frame too big for the transport's buffers (raw, flat normals: ~85 bytes per triangle,
   // ~690k triangles), read by a client that stops after the first chunk until the checks
