@@ -38,6 +38,13 @@ bool LooksLikeGenerator(std::string_view spec) {
   });
 }
 
+// Ends with a volume file's extension, or holds ".vdb#" (a grid named after the file).
+bool NamesVolumeFile(std::string_view spec) {
+  const absl::string_view s(spec.data(), spec.size());
+  return absl::EndsWithIgnoreCase(s, ".vdb") || absl::EndsWithIgnoreCase(s, ".nii") ||
+         absl::EndsWithIgnoreCase(s, ".nii.gz") || spec.find(".vdb#") != std::string_view::npos;
+}
+
 // NAME:N[:SEED].
 absl::Status ParseGenerator(std::string_view spec, const VolumeLimits& limits, VolumeSpec* out) {
   std::vector<std::string_view> parts;
@@ -146,9 +153,13 @@ absl::StatusOr<VolumeSpec> ParseVolumeSpec(std::string_view spec, const VolumeLi
     ISOSTREAM_RETURN_IF_ERROR(ParseRaw(spec, limits, &out));
     return out;
   }
-  // A file may be named like a generator spec, or hold ".vdb#" in its name: it is read then.
+  // "word:..." naming a volume file ("scan:2024.nii.gz", "a:b.vdb#grid") is a file, found or
+  // not (a missing one was called an unknown generator, a usage error); other "word:..." specs
+  // are generators, whatever files exist (one named "cayley:9" has no type a loader reads, and
+  // made the generator spec "cayley:9" an unrecognised volume type). A file may hold ".vdb#"
+  // in its name: it is read whole then.
   const bool file_named_so = CheckInputFile(out.text).ok();
-  if (LooksLikeGenerator(spec) && !file_named_so) {
+  if (LooksLikeGenerator(spec) && !NamesVolumeFile(spec)) {
     ISOSTREAM_RETURN_IF_ERROR(ParseGenerator(spec, limits, &out));
     return out;
   }

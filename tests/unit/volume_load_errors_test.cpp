@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <string>
@@ -550,6 +551,33 @@ TEST(VolumeLoadErrors, MalformedRawSpecs) {
 
 // The spec alone: its parts, read without opening a file, and its own mistakes refused as
 // LoadVolume refuses them, where a missing or damaged file is left to loading.
+// Relative names with a colon: "word:..." naming a volume file is that file, found or not (a
+// missing "scan:2024.nii.gz" was an unknown generator 'scan', a usage error); a generator spec
+// stays one when a file of its name is in the directory (a stray file "cayley:9" made the spec
+// "cayley:9" an unrecognised volume type).
+TEST(VolumeSpec, WordColonNamesAreFilesByTheirExtension) {
+  const std::filesystem::path before = std::filesystem::current_path();
+  std::filesystem::current_path(ScratchDir());
+  for (const std::string file : {"scan:2024.nii.gz", "scan:2024.nii", "ab:1.vdb"}) {
+    const absl::StatusOr<VolumeSpec> parsed = ParseVolumeSpec(file);
+    ASSERT_TRUE(parsed.ok()) << file << ": " << parsed.status();
+    EXPECT_NE(parsed->source, VolumeSource::kGenerator) << file;
+    EXPECT_EQ(parsed->path, file);
+    EXPECT_EQ(LoadVolume(file).status().code(), absl::StatusCode::kNotFound) << file;
+  }
+  const absl::StatusOr<VolumeSpec> grid = ParseVolumeSpec("ab:1.vdb#density");
+  ASSERT_TRUE(grid.ok()) << grid.status();
+  EXPECT_EQ(grid->source, VolumeSource::kVdbFile);
+  EXPECT_EQ(grid->path, "ab:1.vdb");
+  WriteBytes("cayley:9", {'x'});
+  const absl::StatusOr<VolumeSpec> generator = ParseVolumeSpec("cayley:9");
+  EXPECT_TRUE(LoadVolume("cayley:9").ok());
+  std::filesystem::remove("cayley:9");
+  std::filesystem::current_path(before);
+  ASSERT_TRUE(generator.ok()) << generator.status();
+  EXPECT_EQ(generator->source, VolumeSource::kGenerator);
+}
+
 TEST(VolumeSpec, ParsedAloneAndRefusedAsLoadVolumeRefusesIt) {
   absl::StatusOr<VolumeSpec> noise = ParseVolumeSpec("noise:9:7");
   ASSERT_TRUE(noise.ok()) << noise.status();
