@@ -10,6 +10,7 @@
 #include <sstream>
 #include <type_traits>
 
+#include "server/volume/volume_spec.h"
 #include "shared/frame_codec.h"
 #include "shared/number_list.h"
 
@@ -183,6 +184,14 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   if (c.limits.idle_timeout_s < 0 || c.limits.idle_timeout_s > 7 * 86400)
     return bad("idle_timeout_s must be in 0 (off)..604800");
   if (c.tls_cert.empty() != c.tls_key.empty()) return bad("TLS needs both a certificate and a key");
+  // A catalogue entry wrong as written (an unknown generator, a malformed raw layout, a file
+  // type no loader reads) would fail on every request, retried every 30 s: refused at start.
+  // Files are not opened here: a missing or damaged one may be put right while serving.
+  for (const auto& [name, spec] : c.volumes) {
+    const auto parsed = ParseVolumeSpec(spec, VolumeLimits{});
+    if (!parsed.ok())
+      return bad("volume '" + name + "': " + std::string(parsed.status().message()));
+  }
   // What a client can send in a header value (gRPC refuses the rest, so no call could pass).
   for (const char ch : c.token)
     if (ch < 0x20 || ch > 0x7e)

@@ -545,6 +545,10 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
   std::ofstream(default_first_chunk_config) << R"({"frames": {"first_chunk_triangles": 8192}})";
   const std::pair<std::string, std::string> refused[] = {
       {"--volume a=sphere:9 --volume a=cayley:9", "--volume names 'a' twice"},
+      // Catalogue specs wrong as written (they started, and failed every request).
+      {"--volume a=cayley:5l3", "volume 'a': generator spec 'cayley:5l3'"},
+      {"--volume b=raw:x.raw:4x4:float32", "volume 'b': "},
+      {"--volume c=notes.txt", "volume 'c': notes.txt: unrecognised volume type"},
       {"--listen 127.0.0.1:70000", "port in 0..65535"},
       {"--log-level shouty", "log_level must be one of"},
       {"--deadline-ms 10000000000000", "deadline_ms must be in 1..86400000"},
