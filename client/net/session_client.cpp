@@ -52,8 +52,9 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
       // gRPC's own message: this client's deadline. The daemon's (a frame past its deadline,
       // an idle session) say what they are.
       if (m == "Deadline Exceeded" && options.call_timeout.count() > 0)
-        return "the server did not answer within " +
-               ShortestText(double(options.call_timeout.count()) / 1000) + " s";
+        return "the call did not complete within " +
+               ShortestText(double(options.call_timeout.count()) / 1000) +
+               " s (--timeout-s bounds each call, a whole frame included)";
       return "DEADLINE_EXCEEDED: " + m;
     default:
       return std::string(absl::StatusCodeToString(s.code())) + ": " + m;

@@ -203,7 +203,9 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
     return bad("chunk_triangles must be in 256.." + std::to_string(kMaxStreamChunkTriangles));
   if (c.first_chunk_triangles &&
       (*c.first_chunk_triangles < 256 || *c.first_chunk_triangles > c.chunk_triangles))
-    return bad("first_chunk_triangles must be in 256..chunk_triangles");
+    return bad("first_chunk_triangles must be in 256..chunk_triangles (" +
+               std::to_string(c.chunk_triangles) + "), got " +
+               std::to_string(*c.first_chunk_triangles));
   if (c.coarse_triangles < 100) return bad("coarse_triangles must be at least 100");
   if (c.max_queued_chunks < 2 || c.max_queued_chunks > 256)
     return bad("max_queued_chunks must be in 2..256");

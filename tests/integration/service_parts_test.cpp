@@ -54,7 +54,7 @@ TEST(ClientErrors, SayWhetherTheConnectionWasMadeOrLost) {
   o.call_timeout = std::chrono::milliseconds(2500);
   const std::string late =
       net::ExplainCallError(absl::DeadlineExceededError("Deadline Exceeded"), o);
-  EXPECT_NE(late.find("did not answer within 2.5 s"), std::string::npos) << late;
+  EXPECT_NE(late.find("did not complete within 2.5 s"), std::string::npos) << late;
   // The daemon's own deadline is its message, not this client's timeout.
   const std::string daemon_late = net::ExplainCallError(
       absl::DeadlineExceededError("frame took longer than the daemon's deadline of 10000 ms"), o);
