@@ -231,6 +231,23 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
+// A daemon whose every preparation first sleeps 1.5 s (the test hook), with a 0.5 s frame
+// deadline and `flags`, and a client of it (nullptr if either failed).
+std::unique_ptr<net::Client> StartSlowlyPreparingDaemon(const std::vector<std::string>& flags,
+                                                        const ScratchDir& dir,
+                                                        DaemonProcess* daemon) {
+  std::vector<std::string> args = {"--deadline-ms", "500", "--no-cache"};
+  args.insert(args.end(), flags.begin(), flags.end());
+  setenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS", "1500", 1);
+  const bool started = daemon->Start(args, dir.path() + "/isostreamd.log");
+  unsetenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS");
+  if (!started) return nullptr;
+  net::ClientOptions o;
+  o.address = daemon->address();
+  auto c = net::Client::Connect(o);
+  return c.ok() ? std::move(*c) : nullptr;
+}
+
 // A view asked for while its volume is still being prepared (here the preload, slowed to
 // 1.5 s by the test hook) gets its frame: the frame deadline (0.5 s) runs from when the
 // volume is ready, not from the request (a 1025^3 volume took 36-49 s to prepare, and every
@@ -238,17 +255,9 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
 TEST(SlowPreparation, IsNotChargedToTheFrameDeadline) {
   ScratchDir dir;
   DaemonProcess daemon;
-  setenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS", "1500", 1);
-  const bool started =
-      daemon.Start({"--volume", "ball=buckyball:33", "--deadline-ms", "500", "--no-cache"},
-                   dir.path() + "/isostreamd.log");
-  unsetenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS");
-  ASSERT_TRUE(started);
-  net::ClientOptions o;
-  o.address = daemon.address();
-  auto c = net::Client::Connect(o);
-  ASSERT_TRUE(c.ok());
-  auto frame = (*c)->Fetch(MakeView("ball", 1, 0.01, glm::dvec3(2, 2, 2)));
+  auto c = StartSlowlyPreparingDaemon({"--volume", "ball=buckyball:33"}, dir, &daemon);
+  ASSERT_NE(c, nullptr) << DaemonLog(dir);
+  auto frame = c->Fetch(MakeView("ball", 1, 0.01, glm::dvec3(2, 2, 2)));
   ASSERT_TRUE(frame.ok()) << frame.status() << "\n" << DaemonLog(dir);
   EXPECT_GT(frame->mesh.triangle_count(), 0u);
   // frame_ms still counts from the request, preparation included.
@@ -263,22 +272,16 @@ TEST(SlowPreparation, IsNotChargedToTheFrameDeadline) {
 TEST(SlowPreparation, IsNotChargedToAViewThatSupersedesAWaitingOne) {
   ScratchDir dir;
   DaemonProcess daemon;
-  setenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS", "1500", 1);
-  const bool started =
-      daemon.Start({"--volume", "a=buckyball:33", "--volume", "b=buckyball:17", "--volume",
-                    "c=buckyball:21", "--deadline-ms", "500", "--no-cache", "--no-preload"},
-                   dir.path() + "/isostreamd.log");
-  unsetenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS");
-  ASSERT_TRUE(started);
-  net::ClientOptions o;
-  o.address = daemon.address();
-  auto c = net::Client::Connect(o);
-  ASSERT_TRUE(c.ok());
-  auto warm = (*c)->Fetch(MakeView("b", 1, 0.01, glm::dvec3(2, 2, 2)));  // b: prepared now
+  auto c = StartSlowlyPreparingDaemon({"--volume", "a=buckyball:33", "--volume",
+                                       "b=buckyball:17", "--volume", "c=buckyball:21",
+                                       "--no-preload"},
+                                      dir, &daemon);
+  ASSERT_NE(c, nullptr) << DaemonLog(dir);
+  auto warm = c->Fetch(MakeView("b", 1, 0.01, glm::dvec3(2, 2, 2)));  // b: prepared now
   ASSERT_TRUE(warm.ok()) << warm.status() << "\n" << DaemonLog(dir);
   // {volume being prepared for view 1, volume of view 2}.
   for (const auto& [waiting, second] : {std::pair<std::string, std::string>{"a", "a"}, {"c", "b"}}) {
-    auto session = (*c)->OpenSession();
+    auto session = c->OpenSession();
     ASSERT_TRUE(session.ok());
     ASSERT_TRUE((*session)->Send(MakeView(waiting, 2, 0.01, glm::dvec3(2, 2, 2))).ok());
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
