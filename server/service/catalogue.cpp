@@ -194,14 +194,15 @@ absl::Status VolumeCatalogue::MakeRoomLocked(const std::string& keep) {
         " this daemon keeps for generated volumes: ask for a smaller one");
   const size_t max_count = size_t(std::max(1, options_.max_generator_volumes));
   while (entries_.size() > max_count || HeldBytesLocked() > budget) {
-    // Entries being built are skipped (their build mutex is held): dropping one would let a
-    // second request start a second build of the same volume.
+    // Entries not built yet are skipped: being built (their build mutex is held), or just
+    // added by a request that has not taken the mutex yet. Dropping one would let a second
+    // request start a second build of the same volume, beside the uncounted first.
     auto oldest = entries_.end();
     for (auto it = entries_.begin(); it != entries_.end(); ++it) {
       if (it->first == keep) continue;
       if (oldest != entries_.end() && it->second->last_use >= oldest->second->last_use) continue;
       std::unique_lock<std::mutex> idle(it->second->build_mu, std::try_to_lock);
-      if (idle.owns_lock()) oldest = it;
+      if (idle.owns_lock() && it->second->served) oldest = it;
     }
     if (oldest == entries_.end()) break;
     spdlog::info("dropping volume '{}' (least recently used of {} generator volumes, {} held)",
