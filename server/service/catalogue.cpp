@@ -7,6 +7,7 @@
 #include <cmath>
 #include <thread>
 
+#include "absl/strings/match.h"
 #include "server/volume/padding.h"
 #include "shared/malloc_tuning.h"
 
@@ -105,8 +106,14 @@ absl::Status VolumeCatalogue::Check(const std::string& name) const {
   return absl::OkStatus();
 }
 
-absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& name) {
-  ISOSTREAM_RETURN_IF_ERROR(Check(name));
+absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requested) {
+  ISOSTREAM_RETURN_IF_ERROR(Check(requested));
+  // noise:N:1 is noise:N (seed 1 is the default): one volume, prepared, held and counted once
+  // (as leading zeros are refused, so that one volume has one name).
+  const std::string name = options_.volumes.empty() && absl::EndsWith(requested, ":1") &&
+                                   std::count(requested.begin(), requested.end(), ':') == 2
+                               ? requested.substr(0, requested.size() - 2)
+                               : requested;
   std::shared_ptr<Entry> entry;
   {
     std::lock_guard<std::mutex> lock(mu_);

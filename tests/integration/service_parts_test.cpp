@@ -226,6 +226,21 @@ TEST(Catalogue, KeepsABoundedNumberOfGeneratorVolumes) {
   EXPECT_EQ(catalogue.prepared_count(), 4);  // rebuilt after being dropped
 }
 
+// noise:N:1 and noise:N are one volume (seed 1 is the default): it was prepared and held twice.
+TEST(Catalogue, HoldsTheDefaultNoiseSeedUnderOneName) {
+  CatalogueOptions o;
+  VolumeCatalogue catalogue(o);
+  auto plain = catalogue.Get("noise:9");
+  auto seeded = catalogue.Get("noise:9:1");
+  ASSERT_TRUE(plain.ok() && seeded.ok());
+  EXPECT_EQ(plain->get(), seeded->get());
+  EXPECT_EQ(catalogue.prepared_count(), 1);
+  auto other = catalogue.Get("noise:9:11");  // another seed, another volume
+  ASSERT_TRUE(other.ok());
+  EXPECT_NE(other->get(), plain->get());
+  EXPECT_EQ(catalogue.prepared_count(), 2);
+}
+
 // Generated volumes are bounded by their memory too: the count alone (8) let the clients of a
 // --max-dim 1025 daemon make it hold 8 x 6.6 GB. A 33^3 volume's store is 384,000 bytes, a
 // 17^3 one's 82,944, a 65^3 one's 2,239,488.
