@@ -153,8 +153,16 @@ absl::StatusOr<Camera> MakeCamera(const Args& args, const RenderSpace& space, fl
   camera.far_plane = std::max(distance + 1.1f * radius, 2e-3f * radius);
   camera.near_plane = std::max(distance - 1.1f * radius, 1e-3f * camera.far_plane);
   if (!IsValidCamera(camera)) {
+    // Named by cause: a far eye was reported as "--eye equals --target".
+    const glm::vec3 e = camera.eye, t = camera.target;
+    const bool finite = std::isfinite(e.x) && std::isfinite(e.y) && std::isfinite(e.z);
+    if (finite && e == t)
+      return absl::InvalidArgumentError("the camera is degenerate: --eye equals --target");
+    if (finite && glm::length(glm::cross(t - e, camera.up)) == 0)
+      return absl::InvalidArgumentError("the camera is degenerate: --up is parallel to the view");
     return absl::InvalidArgumentError(
-        "the camera is degenerate: --eye equals --target, or --up is parallel to the view");
+        "the eye is too far from the mesh for its size (its distance and the mesh's extent "
+        "cannot both be held in single precision): move --eye closer");
   }
   return camera;
 }

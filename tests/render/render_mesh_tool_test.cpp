@@ -144,7 +144,10 @@ TEST_F(RenderMeshTool, BadInputsExitNonZeroWithAClearMessage) {
       {ply_ + " -o " + png + " --background -0.5,0,0", "0..1"},
       {ply_ + " -o " + png + " --size 0x10", "--size"},
       {ply_ + " -o " + png + " --size 4294967297x1", "--size"},
-      {ply_ + " -o " + png + " --eye 0,0,0 --target 0,0,0", "degenerate"},
+      {ply_ + " -o " + png + " --eye 0,0,0 --target 0,0,0", "--eye equals --target"},
+      // Far eyes were blamed on --eye equal to --target too.
+      {ply_ + " -o " + png + " --eye 1e300,0,0", "the eye is too far from the mesh"},
+      {ply_ + " -o " + png + " --eye 1e30,0,0", "the eye is too far from the mesh"},
       {ply_ + " -o " + png + " --eye 1,1,1 --view-dir 0,0,1", "excludes", true},
       {ply_ + " -o " + png + " --fov 180", "--fov", true},
       {Temp("no_such.ply") + " -o " + png, "no_such.ply"},
