@@ -318,18 +318,20 @@ class ChunkStream : public Reactor, public StreamBase {
   absl::Status RunView(const pb::ViewRequest& view, const ExtractRequest& request,
                        uint64_t generation, std::atomic<bool>* cancel, Clock::time_point received) {
     auto volume = core_->catalogue.Get(view.volume());
+    // Superseded while the volume was being prepared, whether or not that succeeded (a failed
+    // one was counted nowhere).
+    if (cancel->load()) {
+      core_->counters.frames_cancelled.fetch_add(1);
+      return absl::CancelledError("superseded");
+    }
     if (!volume.ok()) return volume.status();
     // The deadline runs from here, once the volume is ready: waiting for a preparation (the
     // preload's, this view's own, or the one a view it superseded was waiting for) is no
     // frame's work, and a 1025^3 volume takes longer to prepare than the default 30 s. (Measured
     // from the wait in Get alone, a view read while its predecessor waited was charged the rest
     // of that wait.) The preparation is bounded by the loader's limits instead, and a client that
-    // gives up meanwhile still cancels the frame (checked below).
+    // gave up meanwhile has cancelled the frame (checked above).
     const Clock::time_point deadline_from = Clock::now();
-    if (cancel->load()) {  // superseded while the volume was being prepared
-      core_->counters.frames_cancelled.fetch_add(1);
-      return absl::CancelledError("superseded");
-    }
     // The retained frame is this stream's for the view (other streams may free it between
     // views, when their own frames need the memory).
     std::lock_guard<std::mutex> using_retained(retained_.mutex());

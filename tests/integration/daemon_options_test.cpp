@@ -296,6 +296,34 @@ TEST(SlowPreparation, IsNotChargedToAViewThatSupersedesAWaitingOne) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
+// A view superseded while its volume's preparation ran, and failed, is counted as cancelled:
+// it was counted nowhere (stats off by one per such view).
+TEST(SlowPreparation, AViewSupersededWhileItsPreparationFailsIsCancelled) {
+  ScratchDir dir;
+  const std::string damaged = dir.path() + "/damaged.nii";
+  std::ofstream(damaged) << "not a NIfTI file";
+  DaemonProcess daemon;
+  auto c = StartSlowlyPreparingDaemon({"--volume", "bad=" + damaged, "--no-preload"}, dir, &daemon);
+  ASSERT_NE(c, nullptr) << DaemonLog(dir);
+  const auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  ASSERT_TRUE((*session)->Send(MakeView("bad", 1, 0.01, glm::dvec3(2, 2, 2))).ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  ASSERT_TRUE((*session)->Send(MakeView("bad", 2, 0.01, glm::dvec3(2, 2, 3))).ok());
+  ASSERT_TRUE((*session)->CloseSend().ok());
+  pb::FrameChunk chunk;
+  while ((*session)->Read(&chunk)) {
+  }
+  const absl::Status ended = (*session)->Finish();
+  EXPECT_EQ(ended.code(), absl::StatusCode::kFailedPrecondition) << ended;
+  const auto after = c->GetServerStats();
+  ASSERT_TRUE(after.ok());
+  EXPECT_EQ(after->frames_cancelled() - before->frames_cancelled(), 1);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 TEST_F(ConfiguredDaemon, ShutdownTurnsHealthOffAndFinishesTheFrameInFlight) {
   // A frame too big for the transport's buffers (raw, flat normals: ~85 bytes per triangle,
   // ~690k triangles), read by a client that stops after the first chunk until the checks
