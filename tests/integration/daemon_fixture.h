@@ -9,7 +9,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <fstream>
 #include <functional>
+#include <iterator>
 #include <memory>
 #include <string>
 #include <thread>
@@ -86,6 +88,13 @@ inline bool ReadFrame(net::Session& s, net::Frame* out) {
 }
 
 // The default daemon (small limits so the limit tests stay quick), shared by a suite.
+// The daemon log written in a scratch directory (the suites and DaemonProcess starts here
+// write it to DIR/isostreamd.log).
+inline std::string DaemonLog(const ScratchDir& scratch) {
+  std::ifstream log(scratch.path() + "/isostreamd.log");
+  return std::string((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+}
+
 class Daemon : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {

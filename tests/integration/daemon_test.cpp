@@ -645,8 +645,7 @@ TEST_F(Daemon, RequestBytesThatDoNotParseAreInvalidArgument) {
         RawCall(daemon_->address(), "/isostream.v1.Isostream/Extract", not_utf8);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
   }
-  std::ifstream log(scratch_->path() + "/isostreamd.log");
-  const std::string text((std::istreambuf_iterator<char>(log)), {});
+  const std::string text = DaemonLog(*scratch_);
   EXPECT_EQ(text.find("libprotobuf"), std::string::npos) << text;
   auto health = Connect()->CheckHealth();
   ASSERT_TRUE(health.ok()) << health.status();
