@@ -7,7 +7,7 @@
 #include <cmath>
 #include <thread>
 
-#include "absl/strings/match.h"
+#include "server/volume/generators.h"
 #include "server/volume/padding.h"
 #include "shared/malloc_tuning.h"
 
@@ -33,7 +33,10 @@ bool AllDigits(const std::string& s, size_t max_digits = 9) {
 // "kind:N" or "noise:N:SEED" with a known generator and 2 <= N <= max_dim. Anything else (a
 // path, raw:..., a huge N) is refused, so a client cannot reach the filesystem or make the
 // daemon allocate a large volume.
-absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim) {
+// Also gives the volume's one name: noise:N:1 is noise:N (seed 1 is the default), as leading
+// zeros are refused, so that one volume is prepared, held and counted once.
+absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim,
+                                std::string* canonical = nullptr) {
   const size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   static const char* const kKinds[] = {"cayley", "buckyball", "sphere", "shells", "noise"};
@@ -52,6 +55,7 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim) {
       return absl::NotFoundError("unknown volume " + Quoted(spec) +
                                  ": a noise SEED is an integer in [0, 2^32)");
     rest = rest.substr(0, seed_colon);
+    if (canonical && std::stoull(seed) == kNoiseDefaultSeed) *canonical = kind + ":" + rest;
   }
   if (!AllDigits(rest)) return absl::NotFoundError("unknown volume " + Quoted(spec));
   const long n = std::stol(rest);
@@ -97,9 +101,10 @@ VolumeCatalogue::VolumeCatalogue(CatalogueOptions options) : options_(std::move(
   TrimHierarchyCache(options_.cache);  // the cap holds from the start, not from the first store
 }
 
-absl::Status VolumeCatalogue::Check(const std::string& name) const {
+absl::Status VolumeCatalogue::Check(const std::string& name, std::string* canonical) const {
   if (name.empty()) return absl::InvalidArgumentError("no volume named");
-  if (options_.volumes.empty()) return CheckGeneratorSpec(name, options_.max_generator_dim);
+  if (options_.volumes.empty())
+    return CheckGeneratorSpec(name, options_.max_generator_dim, canonical);
   if (!options_.volumes.count(name))
     return absl::NotFoundError("unknown volume " + Quoted(name) +
                                " (ListVolumes gives the catalogue)");
@@ -107,13 +112,8 @@ absl::Status VolumeCatalogue::Check(const std::string& name) const {
 }
 
 absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requested) {
-  ISOSTREAM_RETURN_IF_ERROR(Check(requested));
-  // noise:N:1 is noise:N (seed 1 is the default): one volume, prepared, held and counted once
-  // (as leading zeros are refused, so that one volume has one name).
-  const std::string name = options_.volumes.empty() && absl::EndsWith(requested, ":1") &&
-                                   std::count(requested.begin(), requested.end(), ':') == 2
-                               ? requested.substr(0, requested.size() - 2)
-                               : requested;
+  std::string name = requested;
+  ISOSTREAM_RETURN_IF_ERROR(Check(requested, &name));
   std::shared_ptr<Entry> entry;
   {
     std::lock_guard<std::mutex> lock(mu_);

@@ -73,7 +73,8 @@ class VolumeCatalogue {
 
   // OK if `name` may be asked for (it may still fail to load); NOT_FOUND otherwise, with a
   // message saying what names are accepted.
-  absl::Status Check(const std::string& name) const;
+  // `canonical`, if given, becomes the name the volume is held under (noise:N:1 is noise:N).
+  absl::Status Check(const std::string& name, std::string* canonical = nullptr) const;
 
   // Prepares on first use; later calls return the same object.
   absl::StatusOr<ServedVolumePtr> Get(const std::string& name);

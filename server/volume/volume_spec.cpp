@@ -156,17 +156,16 @@ absl::StatusOr<VolumeSpec> ParseVolumeSpec(std::string_view spec, const VolumeLi
   // "word:..." naming a volume file ("scan:2024.nii.gz", "a:b.vdb#grid") is a file, found or
   // not (a missing one was called an unknown generator, a usage error); other "word:..." specs
   // are generators, whatever files exist (one named "cayley:9" has no type a loader reads, and
-  // made the generator spec "cayley:9" an unrecognised volume type). A file may hold ".vdb#"
-  // in its name: it is read whole then.
-  const bool file_named_so = CheckInputFile(out.text).ok();
+  // made the generator spec "cayley:9" an unrecognised volume type).
   if (LooksLikeGenerator(spec) && !NamesVolumeFile(spec)) {
     ISOSTREAM_RETURN_IF_ERROR(ParseGenerator(spec, limits, &out));
     return out;
   }
   out.path = out.text;
-  // PATH.vdb#GRID: the grid name is everything after the first ".vdb#" (it may hold '#').
+  // PATH.vdb#GRID: the grid name is everything after the first ".vdb#" (it may hold '#'),
+  // unless a file has the whole name: it is read whole then.
   const size_t vdb_hash = spec.find(".vdb#");
-  if (vdb_hash != std::string_view::npos && !file_named_so) {
+  if (vdb_hash != std::string_view::npos && !CheckInputFile(out.text).ok()) {
     const size_t hash = vdb_hash + 4;
     out.path = out.text.substr(0, hash);
     out.grid_name = out.text.substr(hash + 1);

@@ -6,7 +6,7 @@
 // unknown generator, a malformed N or raw layout, a file type no loader reads) from a source
 // that fails when read (a missing, unreadable or damaged file): the command line calls the
 // first a usage error. Whether a file by the spec's own name exists is consulted only where the
-// forms overlap ("name:..." and "file.vdb#grid" may also be file names); no file is opened.
+// forms overlap ("file.vdb#grid" may also be a file's name); no file is opened.
 #pragma once
 
 #include <array>
