@@ -60,6 +60,17 @@ inline unsigned AboveCorners(const float* f, float iso) {
 #endif
 }
 
+// Corners whose value equals iso: their crossings are the corner's vertex (LeafEmitter).
+inline unsigned CornersAtIso(const float* f, float iso) {
+#ifdef __SSE2__
+  return unsigned(_mm_movemask_ps(_mm_cmpeq_ps(_mm_loadu_ps(f), _mm_set1_ps(iso))));
+#else
+  unsigned m = 0;
+  for (int i = 0; i < 4; ++i) m |= unsigned(f[i] == iso) << i;
+  return m;
+#endif
+}
+
 // Corners whose value is within tau times the largest distance of a corner's value from iso,
 // doubled: a superset of those a crossing can round onto, on some coordinate (Context::snap_tau
 // bounds the parameter of a crossing with a stored coordinate of one of its edge's ends, and a

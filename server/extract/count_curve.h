@@ -44,7 +44,7 @@ inline int LeafTriangles(const Context& c, const Node& t) {
     if (mc.edge_count == 0) continue;
     if (straddles)
       n += StraddlingComponentTriangles(c, t, s, mc);
-    else if (CornersNearIso(t.f, c.iso[s], c.snap_tau) != 0)
+    else if (CornersAtIso(t.f, c.iso[s]) != 0)  // as LeafEmitter counts: no positions needed
       n += ComponentCrossings(c, t, s, mc).Triangles();
     else
       n += mc.edge_count - 2;

@@ -133,12 +133,15 @@ class LeafEmitter {
     const MarchingTetsCase& mc = (*c_.cases)[above];
     if (mc.edge_count == 0) return 0;
     if (c_.clip && !InsideDataBox(c_, t)) return StraddlingComponent(t, s, mc);
+    // Only crossings on a corner at the isovalue drop triangles; where the others are stored
+    // (OffTheEnds) does not change the count, so counting needs no positions.
+    if constexpr (!kEmit)
+      return CornersAtIso(t.f, iso) != 0 ? ComponentNearCorners(t, s, mc) : mc.edge_count - 2;
     // A component with a corner at the isovalue (its crossings are the corner's vertex) or next
     // to it (a crossing's coordinate may round onto the corner's: OffTheEnds) is placed
     // exactly, out of line.
     if (CornersNearIso(t.f, iso, c_.snap_tau) != 0) return ComponentNearCorners(t, s, mc);
     const int count = mc.edge_count - 2;
-    if (!kEmit) return count;
     uint32_t v[4];
     const int edges = mc.edge_count;  // a local: the stores below could alias the table
     for (int i = 0; i < edges; ++i) v[i] = EdgeVertex(t, mc.edge[i][0], mc.edge[i][1], s);
