@@ -303,12 +303,16 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   if (recording) retained->EndRecording(volume, whole_mesh ? &result->mesh : nullptr);
   if (retained && whole_mesh) retained->Drew(volume, remembering, result->stats.triangles);
   if (complete) return absl::OkStatus();
-  if (!error.ok()) return error;
-  if (!result.ok() && result.status().code() == absl::StatusCode::kDeadlineExceeded)
-    return absl::DeadlineExceededError("frame took longer than the daemon's deadline of " +
-                                       std::to_string(settings_.deadline_ms) + " ms");
-  if (!result.ok() && result.status().code() != absl::StatusCode::kCancelled)
-    return result.status();
+  absl::Status failed = error;
+  if (failed.ok() && !result.ok() && result.status().code() == absl::StatusCode::kDeadlineExceeded)
+    failed = absl::DeadlineExceededError("frame took longer than the daemon's deadline of " +
+                                         std::to_string(settings_.deadline_ms) + " ms");
+  else if (failed.ok() && !result.ok() && result.status().code() != absl::StatusCode::kCancelled)
+    failed = result.status();
+  if (!failed.ok()) {
+    counters_->frames_failed.fetch_add(1);
+    return failed;
+  }
   counters_->frames_cancelled.fetch_add(1);
   return absl::CancelledError("frame cancelled");
 }

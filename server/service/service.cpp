@@ -239,6 +239,7 @@ pb::ServerStats IsostreamService::Stats() const {
   s.set_frames_started(c.frames_started.load());
   s.set_frames_sent(c.frames_sent.load());
   s.set_frames_cancelled(c.frames_cancelled.load());
+  s.set_frames_failed(c.frames_failed.load());
   s.set_frames_reordered(c.frames_reordered.load());
   s.set_retained_bytes(core_->retain_budget.used());
   s.set_chunks_sent(c.chunks_sent.load());

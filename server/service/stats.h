@@ -16,6 +16,7 @@ struct ServerCounters {
   std::atomic<int64_t> frames_started{0};
   std::atomic<int64_t> frames_sent{0};
   std::atomic<int64_t> frames_cancelled{0};
+  std::atomic<int64_t> frames_failed{0};  // started, ended by the server with an error
   std::atomic<int64_t> frames_reordered{0};  // drawn from a stream's retained frame
   std::atomic<int64_t> chunks_sent{0};
   std::atomic<int64_t> bytes_sent{0};

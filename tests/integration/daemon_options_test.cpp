@@ -63,6 +63,9 @@ TEST_F(GuardedDaemon, FrameOverTriangleLimitIsResourceExhausted) {
   auto s = Connect("s3cret")->Fetch(MakeView("buckyball:65", 1, 0.002, glm::dvec3(2, 2, 2)));
   EXPECT_EQ(s.status().code(), absl::StatusCode::kResourceExhausted);
   EXPECT_NE(s.status().message().find("100000"), std::string::npos) << s.status();
+  auto stats = Connect("s3cret")->GetServerStats();
+  ASSERT_TRUE(stats.ok());
+  EXPECT_EQ(stats->frames_failed(), 1);  // the suite's only frame over the limit
 }
 
 // SIGHUP (a closing terminal) stops it as SIGTERM does (ConfiguredDaemon's shutdown test): its
@@ -270,6 +273,13 @@ TEST_F(ImpatientDaemon, SlowFrameIsDeadlineExceeded) {
               absl::StatusCode::kDeadlineExceeded);
   auto health = c->CheckHealth();
   EXPECT_TRUE(health.ok() && *health);
+  // Counted as failed by the server, not as cancelled (nobody cancelled them) or sent.
+  auto stats = c->GetServerStats();
+  ASSERT_TRUE(stats.ok());
+  EXPECT_EQ(stats->frames_failed(), 2);
+  EXPECT_EQ(stats->frames_started(), 2);
+  EXPECT_EQ(stats->frames_cancelled(), 0);
+  EXPECT_EQ(stats->frames_sent(), 0);
 }
 
 // --idle-timeout-s 1: a session with no request and nothing in flight for a second is ended
