@@ -9,15 +9,26 @@
 // join of a 1 M-triangle frame went from 34-42 ms to 13-21 ms (BENCHMARKS.md). The cost is
 // that the process keeps its peak heap; long-lived blocks above 32 MB (hierarchy bricks) still
 // come from mmap and go back when freed.
+//
+// It keeps it per arena, though: glibc gives threads up to 8 heaps per core, and each kept the
+// peak of the frames and preparations its threads happened to run. isostreamd's RSS climbed from
+// 230 MB to 600-700 MB over 24-45 prepare/evict cycles of 257^3 volumes with --generator-mb 150
+// (tests/bench/daemon_rss_cycles.sh); with one arena per core it stays at 170-250 MB, the held
+// volume plus one frame's buffers. The hot paths do not allocate, so sharing heaps costs no
+// measurable lock contention.
 #pragma once
 
 #include <malloc.h>
+
+#include <algorithm>
+#include <thread>
 
 namespace isostream {
 
 inline void KeepFreedMemoryForReuse() {
   mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's largest allowed value on 64-bit
   mallopt(M_TRIM_THRESHOLD, 1 << 30);
+  mallopt(M_ARENA_MAX, int(std::max(2u, std::thread::hardware_concurrency())));
 }
 
 // Gives the heap's free pages back to the system now: after a rare event that freed much more
