@@ -111,12 +111,13 @@ absl::Status VolumeCatalogue::Check(const std::string& name, std::string* canoni
   return absl::OkStatus();
 }
 
-absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requested) {
+absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requested,
+                                                     const std::function<bool()>& cancelled) {
   std::string name = requested;
   ISOSTREAM_RETURN_IF_ERROR(Check(requested, &name));
+  std::unique_lock<std::mutex> lock(mu_);
   std::shared_ptr<Entry> entry;
   {
-    std::lock_guard<std::mutex> lock(mu_);
     auto& e = entries_[name];
     const bool added = !e;
     if (added) {
@@ -134,10 +135,24 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
       }
     }
   }
-  std::lock_guard<std::mutex> build_lock(entry->build_mu);
   if (entry->served) return entry->served;
-  const auto now = std::chrono::steady_clock::now();
-  if (!entry->failed.ok() && now - entry->failed_at < kRetryFailedAfter) return entry->failed;
+  if (!entry->preparing) {
+    if (!entry->failed.ok() &&
+        std::chrono::steady_clock::now() - entry->failed_at < kRetryFailedAfter)
+      return entry->failed;
+    entry->preparing = true;
+    entry->failed = absl::OkStatus();
+    preparations_.Submit([this, name, entry] { Prepare(name, entry); });
+  }
+  for (;;) {
+    if (entry->served) return entry->served;
+    if (!entry->preparing) return entry->failed;
+    if (cancelled && cancelled()) return absl::CancelledError("gave up waiting for the volume");
+    prepared_cv_.wait_for(lock, kCancelPoll);
+  }
+}
+
+void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Entry>& entry) {
   const std::string spec = options_.volumes.empty() ? name : options_.volumes.at(name);
   HierarchyBuildOptions build;
   build.threads = options_.build_threads;
@@ -150,20 +165,23 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
     ReturnFreedMemory();
     spdlog::error("preparing volume '{}' ({}) failed: {}", name, spec,
                   std::string(prepared.status().message()));
-    // The message names the spec, which the operator wrote: it stays in the log for catalogue
-    // entries and is not shown to clients. Nor is its code: the client's request was right
-    // (INVALID_ARGUMENT made the viewer call it an argument error).
+    std::lock_guard<std::mutex> lock(mu_);
+    entry->preparing = false;
     if (options_.volumes.empty()) {
       // Nothing is held: its bytes must not keep other generated volumes out.
-      std::lock_guard<std::mutex> lock(mu_);
       auto it = entries_.find(name);
       if (it != entries_.end() && it->second == entry) entries_.erase(it);
-      return prepared.status();
+      entry->failed = prepared.status();
+    } else {
+      // The message names the spec, which the operator wrote: it stays in the log for
+      // catalogue entries and is not shown to clients. Nor is its code: the client's request
+      // was right (INVALID_ARGUMENT made the viewer call it an argument error).
+      entry->failed = absl::FailedPreconditionError(
+          "volume " + Quoted(name) + " could not be prepared on the daemon (see its log)");
+      entry->failed_at = std::chrono::steady_clock::now();  // a slow failure gets its 30 s too
     }
-    entry->failed = absl::FailedPreconditionError(
-        "volume " + Quoted(name) + " could not be prepared on the daemon (see its log)");
-    entry->failed_at = std::chrono::steady_clock::now();  // a slow failure gets its 30 s too
-    return entry->failed;
+    prepared_cv_.notify_all();
+    return;
   }
   auto served = std::make_shared<ServedVolume>();
   served->name = name;
@@ -180,10 +198,12 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
   const std::string& note = served->prepared.cache_note;
   if (note.find("not stored") != std::string::npos)
     spdlog::warn("volume '{}': hierarchy cache: {}", name, note);
-  entry->served = served;
   prepared_.fetch_add(1);
   ReturnFreedMemory();  // what preparing freed (the volume's grid above all) is not reused
-  return entry->served;
+  std::lock_guard<std::mutex> lock(mu_);
+  entry->served = std::move(served);
+  entry->preparing = false;
+  prepared_cv_.notify_all();
 }
 
 uint64_t VolumeCatalogue::HeldBytesLocked() const {
@@ -201,15 +221,13 @@ absl::Status VolumeCatalogue::MakeRoomLocked(const std::string& keep) {
         " this daemon keeps for generated volumes: ask for a smaller one");
   const size_t max_count = size_t(std::max(1, options_.max_generator_volumes));
   while (entries_.size() > max_count || HeldBytesLocked() > budget) {
-    // Entries not built yet are skipped: being built (their build mutex is held), or just
-    // added by a request that has not taken the mutex yet. Dropping one would let a second
-    // request start a second build of the same volume, beside the uncounted first.
+    // Entries being prepared are skipped: dropping one would let a second request start a
+    // second build of the same volume, beside the uncounted first.
     auto oldest = entries_.end();
     for (auto it = entries_.begin(); it != entries_.end(); ++it) {
-      if (it->first == keep) continue;
+      if (it->first == keep || !it->second->served) continue;
       if (oldest != entries_.end() && it->second->last_use >= oldest->second->last_use) continue;
-      std::unique_lock<std::mutex> idle(it->second->build_mu, std::try_to_lock);
-      if (idle.owns_lock() && it->second->served) oldest = it;
+      oldest = it;
     }
     if (oldest == entries_.end()) break;
     spdlog::info("dropping volume '{}' (least recently used of {} generator volumes, {} held)",

@@ -4,11 +4,15 @@
 // up to a size limit, so a daemon serves something with no data at all.
 //
 // Volumes are prepared (loaded, padded, hierarchy built or read from the cache) on first use
-// and kept. Concurrent first requests for one volume wait for a single build.
+// and kept. Concurrent first requests for one volume wait for a single build, which runs on the
+// catalogue's own threads: a caller that gives up stops waiting at once (its session slot is
+// free again), and the build goes on for the next one.
 #pragma once
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -18,6 +22,7 @@
 #include "server/extract/budget_memo.h"
 #include "server/hierarchy/prepared_volume.h"
 #include "server/service/volume_histogram.h"
+#include "server/service/worker_pool.h"
 #include "shared/frame_codec.h"
 
 namespace isostream::service {
@@ -76,8 +81,11 @@ class VolumeCatalogue {
   // `canonical`, if given, becomes the name the volume is held under (noise:N:1 is noise:N).
   absl::Status Check(const std::string& name, std::string* canonical = nullptr) const;
 
-  // Prepares on first use; later calls return the same object.
-  absl::StatusOr<ServedVolumePtr> Get(const std::string& name);
+  // Prepares on first use; later calls return the same object. While the volume is being
+  // prepared the caller waits, until `cancelled` (may be empty; polled, so it must not block)
+  // says it gave up: then CANCELLED, and the preparation goes on without it.
+  absl::StatusOr<ServedVolumePtr> Get(const std::string& name,
+                                      const std::function<bool()>& cancelled = {});
 
   std::vector<std::string> Names() const;
   bool generators_allowed() const { return options_.volumes.empty(); }
@@ -88,17 +96,28 @@ class VolumeCatalogue {
   int held_count() const;
 
  private:
+  // All fields under the catalogue's mu_.
   struct Entry {
-    std::mutex build_mu;  // held while preparing, so one build per volume
     ServedVolumePtr served;
+    bool preparing = false;  // a preparation job is queued or running: one per volume
     uint64_t store_bytes = 0;  // of a generator volume, known from its spec before preparing
-    uint64_t last_use = 0;  // under the catalogue's mu_
-    // A catalogue entry that failed to prepare: the answer until kRetryFailedAfter has passed,
-    // so that clients asking again do not re-read a bad file and fill the log each time.
+    uint64_t last_use = 0;
+    // Why the last preparation failed, for the callers that waited for it. A catalogue entry
+    // also keeps it as the answer until kRetryFailedAfter has passed, so that clients asking
+    // again do not re-read a bad file and fill the log each time.
     absl::Status failed;
     std::chrono::steady_clock::time_point failed_at;
   };
   static constexpr std::chrono::seconds kRetryFailedAfter{30};
+  // How often a waiting caller asks whether it gave up: well within the second a client that
+  // left may wait for its slot.
+  static constexpr std::chrono::milliseconds kCancelPoll{50};
+  // Preparations run at once (more wait in line). Each uses every core already (TBB); a few
+  // keep a small volume from waiting behind a large one. Preparations hold no session slot, so
+  // this, not --max-sessions, bounds them.
+  static constexpr int kPreparationThreads = 4;
+  // Runs on a preparation thread: prepares `name` and hands the outcome to `entry`'s waiters.
+  void Prepare(const std::string& name, const std::shared_ptr<Entry>& entry);
   // Drops idle generator volumes, least recently used first, until those left (`keep`
   // included) are within max_generator_volumes and max_generator_bytes; RESOURCE_EXHAUSTED if
   // `keep` cannot fit within the bytes.
@@ -106,9 +125,12 @@ class VolumeCatalogue {
   uint64_t HeldBytesLocked() const;
   CatalogueOptions options_;
   mutable std::mutex mu_;
+  std::condition_variable prepared_cv_;  // a preparation ended
   std::map<std::string, std::shared_ptr<Entry>> entries_;
   std::atomic<int> prepared_{0};
   uint64_t use_clock_ = 0;
+  // Declared last: destroyed (queued preparations run, threads joined) before what they use.
+  WorkerPool preparations_{kPreparationThreads};
 };
 
 }  // namespace isostream::service

@@ -317,7 +317,9 @@ class ChunkStream : public Reactor, public StreamBase {
 
   absl::Status RunView(const pb::ViewRequest& view, const ExtractRequest& request,
                        uint64_t generation, std::atomic<bool>* cancel, Clock::time_point received) {
-    auto volume = core_->catalogue.Get(view.volume());
+    // The wait for a preparation ends as soon as the view is superseded or the client leaves:
+    // the job, and with it the stream's slot, is not held until the preparation ends.
+    auto volume = core_->catalogue.Get(view.volume(), [cancel] { return cancel->load(); });
     // Superseded while the volume was being prepared, whether or not that succeeded (a failed
     // one was counted nowhere).
     if (cancel->load()) {
@@ -330,7 +332,7 @@ class ChunkStream : public Reactor, public StreamBase {
     // frame's work, and a 1025^3 volume takes longer to prepare than the default 30 s. (Measured
     // from the wait in Get alone, a view read while its predecessor waited was charged the rest
     // of that wait.) The preparation is bounded by the loader's limits instead, and a client that
-    // gave up meanwhile has cancelled the frame (checked above).
+    // gave up meanwhile stopped waiting for it (checked above).
     const Clock::time_point deadline_from = Clock::now();
     // The retained frame is this stream's for the view (other streams may free it between
     // views, when their own frames need the memory).

@@ -163,7 +163,8 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
     };
     const grpc::Status gone(grpc::StatusCode::CANCELLED, "cancelled by the client");
     if (context->IsCancelled()) return finish(gone);
-    auto served = core->catalogue.Get(name);
+    auto served = core->catalogue.Get(name, [context] { return context->IsCancelled(); });
+    if (context->IsCancelled()) return finish(gone);
     if (!served.ok()) return finish(ToGrpc(served.status()));
     const Volume& v = *(*served)->prepared.volume;
     const Hierarchy& h = *(*served)->prepared.hierarchy;

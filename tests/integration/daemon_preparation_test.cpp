@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <memory>
@@ -36,14 +37,15 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
-// A daemon whose every preparation first sleeps 1.5 s (the test hook), with a 0.5 s frame
+// A daemon whose every preparation first sleeps `delay_ms` (the test hook), with a 0.5 s frame
 // deadline and `flags`, and a client of it (nullptr if either failed).
 std::unique_ptr<net::Client> StartSlowlyPreparingDaemon(const std::vector<std::string>& flags,
                                                         const ScratchDir& dir,
-                                                        DaemonProcess* daemon) {
+                                                        DaemonProcess* daemon,
+                                                        int delay_ms = 1500) {
   std::vector<std::string> args = {"--deadline-ms", "500", "--no-cache"};
   args.insert(args.end(), flags.begin(), flags.end());
-  setenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS", "1500", 1);
+  setenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS", std::to_string(delay_ms).c_str(), 1);
   const bool started = daemon->Start(args, dir.path() + "/isostreamd.log");
   unsetenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS");
   if (!started) return nullptr;
@@ -126,6 +128,73 @@ TEST(SlowPreparation, AViewSupersededWhileItsPreparationFailsIsCancelled) {
   const auto after = c->GetServerStats();
   ASSERT_TRUE(after.ok());
   EXPECT_EQ(after->frames_cancelled() - before->frames_cancelled(), 1);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
+// Polls the daemon's open sessions until `open` (true) or `until` has passed (false).
+bool WaitForOpenSessions(net::Client& c, int64_t open, std::chrono::steady_clock::time_point until) {
+  for (;;) {
+    const auto stats = c.GetServerStats();
+    if (stats.ok() && stats->sessions_open() == open) return true;
+    if (std::chrono::steady_clock::now() >= until) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+// Clients that give up while their view or volume-info call waits for a preparation (here
+// 8 s long) give their --max-sessions slot back at once, not when the preparation ends: they
+// held it (a 1025^3 volume takes minutes), so a few impatient clients locked everyone out. The
+// preparation goes on, and serves the next client.
+TEST(SlowPreparation, ClientsThatGiveUpWaitingReleaseTheirSlots) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  auto c = StartSlowlyPreparingDaemon(
+      {"--volume", "a=buckyball:33", "--no-preload", "--max-sessions", "1"}, dir, &daemon, 8000);
+  ASSERT_NE(c, nullptr) << DaemonLog(dir);
+  const auto t0 = std::chrono::steady_clock::now();
+  using Ms = std::chrono::milliseconds;
+  const auto ms_since = [](std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration_cast<Ms>(std::chrono::steady_clock::now() - t).count();
+  };
+
+  // A session that leaves (as a closed window or a dead client would).
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  ASSERT_TRUE((*session)->Send(MakeView("a", 1, 0.01, glm::dvec3(2, 2, 2))).ok());
+  ASSERT_TRUE(WaitForOpenSessions(*c, 1, std::chrono::steady_clock::now() + Ms(2000)));
+  std::this_thread::sleep_for(Ms(300));  // its view is waiting now
+  auto cancelled = std::chrono::steady_clock::now();
+  (*session)->Cancel();
+  EXPECT_TRUE(WaitForOpenSessions(*c, 0, cancelled + Ms(1000)))
+      << "slot still held " << ms_since(cancelled) << " ms after the session left\n"
+      << DaemonLog(dir);
+  std::printf("session: slot released %lld ms after the cancel\n",
+              static_cast<long long>(ms_since(cancelled)));
+
+  // Calls that time out on the client: an Extract, then a volume-info call.
+  net::ClientOptions impatient;
+  impatient.address = daemon.address();
+  impatient.call_timeout = Ms(500);
+  auto i = net::Client::Connect(impatient);
+  ASSERT_TRUE(i.ok());
+  auto frame = (*i)->Fetch(MakeView("a", 2, 0.01, glm::dvec3(2, 2, 2)));
+  EXPECT_EQ(frame.status().code(), absl::StatusCode::kDeadlineExceeded) << frame.status();
+  cancelled = std::chrono::steady_clock::now();
+  EXPECT_TRUE(WaitForOpenSessions(*c, 0, cancelled + Ms(1000)))
+      << "slot still held " << ms_since(cancelled) << " ms after the Extract call timed out";
+  auto info = (*i)->GetVolumeInfo("a");
+  EXPECT_EQ(info.status().code(), absl::StatusCode::kDeadlineExceeded) << info.status();
+  cancelled = std::chrono::steady_clock::now();
+  EXPECT_TRUE(WaitForOpenSessions(*c, 0, cancelled + Ms(1000)))
+      << "slot still held " << ms_since(cancelled) << " ms after GetVolumeInfo timed out";
+  EXPECT_LT(ms_since(t0), 6000) << "the checks above ran into the end of the preparation";
+
+  // The preparation was not given up with its first client: the next one gets its frame.
+  auto later = c->Fetch(MakeView("a", 3, 0.01, glm::dvec3(2, 2, 2)));
+  ASSERT_TRUE(later.ok()) << later.status() << "\n" << DaemonLog(dir);
+  EXPECT_GT(later->mesh.triangle_count(), 0u);
+  const std::string log = DaemonLog(dir);
+  EXPECT_EQ(log.find("prepared volume 'a'"), log.rfind("prepared volume 'a'")) << log;
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
