@@ -3,7 +3,8 @@
 // Settings come from defaults, then --config FILE.json, then flags. It listens on 127.0.0.1
 // unless told otherwise, prints "listening on HOST:PORT" on stdout once it accepts calls (port
 // 0 picks a free port), and on SIGINT/SIGTERM/SIGHUP turns its health status to NOT_SERVING,
-// refuses new streams, lets frames in flight finish (bounded wait) and exits 0.
+// refuses new streams, ends views still waiting for a volume's preparation (UNAVAILABLE) and
+// stops that preparation, lets frames in flight finish (bounded wait) and exits 0.
 #include <google/protobuf/stubs/logging.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>

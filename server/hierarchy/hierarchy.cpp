@@ -116,10 +116,11 @@ class HierarchyBuilder {
 
   // False if a sample is not finite (then eta is meaningless and the build is abandoned).
   bool Run(const HierarchyBuildOptions& options) {
+    stop_ = options.stop;
     const size_t total = size_t(n_) * n_ * n_;
     const bool report = options.progress && total > (size_t{1} << 24);
     size_t left = total;  // points of scale >= h (and the 8 corners)
-    for (int h = 0; h < k_; ++h) {
+    for (int h = 0; h < k_ && !Stopped(); ++h) {
       if (h == 0) {
         if (!ForEachTile(0, [&](int tx, int ty, int tz) { return FinestTile(tx, ty, tz); }))
           return false;
@@ -142,6 +143,8 @@ class HierarchyBuilder {
   static_assert(HierarchyBrick::kMask + 1 == kT - 1, "scale-0 tiles are bricks");
   static constexpr int kAhead = 3 * (kT - 1);  // prefetch distance in lattice points
 
+  bool Stopped() const { return stop_ && stop_->load(std::memory_order_relaxed); }
+
   // Scale h's lattice (spacing u = 2^h) cut into tiles of 8^3 cells, in parallel; tile rows
   // along x stay on one thread (consecutive in memory).
   template <typename F>
@@ -150,6 +153,7 @@ class HierarchyBuilder {
     const int tiles = cells / (kT - 1) + 1;  // tiles per axis (each owns 8 points of it)
     std::atomic<bool> all_ok{true};
     auto rows = [&](const tbb::blocked_range<int>& r) {
+      if (Stopped()) return;  // the remaining ranges are skipped, each at one load's cost
       bool ok = true;
       for (int zy = r.begin(); zy != r.end(); ++zy)
         for (int tx = 0; tx < tiles; ++tx) ok &= tile(tx, zy % tiles, zy / tiles);
@@ -374,6 +378,7 @@ class HierarchyBuilder {
   HierarchyBrick* bricks_;
   const uint64_t* offset_[3];
   int k_, n_, last_;
+  const std::atomic<bool>* stop_ = nullptr;
 };
 
 template <typename F>
@@ -522,6 +527,8 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
   HierarchyBuilder builder(samples.k, samples.values.data(), h.get());
   bool finite = true;
   arena.execute([&] { finite = builder.Run(options); });
+  // Before the finite check: a stopped build left tiles unwritten, not samples wrong.
+  if (options.stop && options.stop->load()) return absl::CancelledError("hierarchy build stopped");
   if (!finite) return absl::InvalidArgumentError("hierarchy: non-finite sample");
   return HierarchyPtr(std::move(h));
 } catch (const std::bad_alloc&) {

@@ -12,6 +12,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -142,6 +143,9 @@ struct HierarchyBuildOptions {
   int threads = 0;  // 0: all cores
   // Called after each scale with the fraction of points done; may be empty.
   std::function<void(double)> progress;
+  // If set, and true while building (a daemon shutting down), the build gives up between
+  // tiles and returns CANCELLED: a 1025^3 build takes far longer than a service may take to stop.
+  const std::atomic<bool>* stop = nullptr;
 };
 
 // Builds eta from the padded samples (taken over: the build uses their array as scratch).

@@ -13,6 +13,11 @@ double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
+absl::Status StopRequested(const HierarchyBuildOptions& build) {
+  if (build.stop && build.stop->load()) return absl::CancelledError("preparation stopped");
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const VolumeLimits& limits,
@@ -22,6 +27,7 @@ absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const Volu
   auto t0 = std::chrono::steady_clock::now();
   ISOSTREAM_ASSIGN_OR_RETURN(p.volume, LoadVolume(spec, limits));
   p.load_s = Seconds(t0);
+  ISOSTREAM_RETURN_IF_ERROR(StopRequested(build));
   t0 = std::chrono::steady_clock::now();
   ISOSTREAM_ASSIGN_OR_RETURN(PaddedSamples padded, PadToHierarchyDomain(*p.volume));
   p.pad_s = Seconds(t0);
@@ -33,6 +39,7 @@ absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const Volu
   facts->grid.reset();
   p.volume = std::move(facts);
   ReturnFreedMemory();
+  ISOSTREAM_RETURN_IF_ERROR(StopRequested(build));
   t0 = std::chrono::steady_clock::now();
   ISOSTREAM_ASSIGN_OR_RETURN(
       p.hierarchy, LoadOrBuildHierarchy(std::move(padded), cache, build, &p.cache, &p.cache_note));

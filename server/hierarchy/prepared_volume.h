@@ -20,6 +20,8 @@ struct PreparedVolume {
   double load_s = 0, pad_s = 0, hierarchy_s = 0;
 };
 
+// build.stop, if set, also stops the preparation between its steps (CANCELLED); loading and
+// padding are not interrupted.
 absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const VolumeLimits& limits,
                                              const HierarchyCacheOptions& cache,
                                              const HierarchyBuildOptions& build);

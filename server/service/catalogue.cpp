@@ -75,6 +75,12 @@ uint64_t GeneratorStoreBytes(const std::string& spec) {
   return bricks * bricks * bricks * sizeof(HierarchyBrick);
 }
 
+absl::Status ShuttingDown() {
+  return absl::UnavailableError(
+      "the server is shutting down (the volume was still being prepared); try again when it is "
+      "back");
+}
+
 std::string MiB(uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; }
 
 }  // namespace
@@ -101,6 +107,16 @@ VolumeCatalogue::VolumeCatalogue(CatalogueOptions options) : options_(std::move(
   TrimHierarchyCache(options_.cache);  // the cap holds from the start, not from the first store
 }
 
+VolumeCatalogue::~VolumeCatalogue() { Stop(); }
+
+void VolumeCatalogue::Stop() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    stop_.store(true);
+  }
+  prepared_cv_.notify_all();
+}
+
 absl::Status VolumeCatalogue::Check(const std::string& name, std::string* canonical) const {
   if (name.empty()) return absl::InvalidArgumentError("no volume named");
   if (options_.volumes.empty())
@@ -116,6 +132,11 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
   std::string name = requested;
   ISOSTREAM_RETURN_IF_ERROR(Check(requested, &name));
   std::unique_lock<std::mutex> lock(mu_);
+  if (stop_.load()) {
+    auto it = entries_.find(name);
+    if (it != entries_.end() && it->second->served) return it->second->served;
+    return ShuttingDown();
+  }
   std::shared_ptr<Entry> entry;
   {
     auto& e = entries_[name];
@@ -147,6 +168,7 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
   for (;;) {
     if (entry->served) return entry->served;
     if (!entry->preparing) return entry->failed;
+    if (stop_.load()) return ShuttingDown();
     if (cancelled && cancelled()) return absl::CancelledError("gave up waiting for the volume");
     prepared_cv_.wait_for(lock, kCancelPoll);
   }
@@ -156,8 +178,25 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
   const std::string spec = options_.volumes.empty() ? name : options_.volumes.at(name);
   HierarchyBuildOptions build;
   build.threads = options_.build_threads;
-  if (options_.prepare_delay.count() > 0) std::this_thread::sleep_for(options_.prepare_delay);
-  auto prepared = PrepareVolume(spec, options_.limits, options_.cache, build);
+  build.stop = &stop_;
+  // The test hook stands for a slow preparation, so Stop cuts it short too.
+  const auto delay_end = std::chrono::steady_clock::now() + options_.prepare_delay;
+  while (!stop_.load() && std::chrono::steady_clock::now() < delay_end)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  absl::StatusOr<PreparedVolume> prepared = absl::CancelledError("preparation stopped");
+  if (!stop_.load()) prepared = PrepareVolume(spec, options_.limits, options_.cache, build);
+  if (!prepared.ok() && stop_.load()) {
+    // Given up for the shutdown, not failed: nothing to log as an error or to remember.
+    ReturnFreedMemory();
+    spdlog::info("preparing volume '{}' stopped: shutting down", name);
+    std::lock_guard<std::mutex> lock(mu_);
+    entry->preparing = false;
+    entry->failed = ShuttingDown();
+    auto it = entries_.find(name);
+    if (it != entries_.end() && it->second == entry) entries_.erase(it);
+    prepared_cv_.notify_all();
+    return;
+  }
   if (!prepared.ok()) {
     // A preparation that failed part way freed what it had made: the grid's leaves are heap
     // blocks, which the untrimmed heap (malloc_tuning.h) kept (after padding 'sphere:1025'

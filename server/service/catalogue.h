@@ -75,6 +75,7 @@ void QuantizationFor(const Volume& volume, QuantizationBox* box, int* bits);
 class VolumeCatalogue {
  public:
   explicit VolumeCatalogue(CatalogueOptions options);
+  ~VolumeCatalogue();  // stops preparations in progress and waits for them to give up
 
   // OK if `name` may be asked for (it may still fail to load); NOT_FOUND otherwise, with a
   // message saying what names are accepted.
@@ -83,9 +84,15 @@ class VolumeCatalogue {
 
   // Prepares on first use; later calls return the same object. While the volume is being
   // prepared the caller waits, until `cancelled` (may be empty; polled, so it must not block)
-  // says it gave up: then CANCELLED, and the preparation goes on without it.
+  // says it gave up: then CANCELLED, and the preparation goes on without it. After Stop, a
+  // volume not prepared yet is UNAVAILABLE.
   absl::StatusOr<ServedVolumePtr> Get(const std::string& name,
                                       const std::function<bool()>& cancelled = {});
+
+  // The daemon is shutting down: callers waiting for a preparation get UNAVAILABLE now,
+  // preparations in progress give up at their next check (between steps, between the
+  // hierarchy's tiles), and none start. Prepared volumes are still served.
+  void Stop();
 
   std::vector<std::string> Names() const;
   bool generators_allowed() const { return options_.volumes.empty(); }
@@ -129,6 +136,7 @@ class VolumeCatalogue {
   std::map<std::string, std::shared_ptr<Entry>> entries_;
   std::atomic<int> prepared_{0};
   uint64_t use_clock_ = 0;
+  std::atomic<bool> stop_{false};  // set under mu_, so that waiters cannot miss it
   // Declared last: destroyed (queued preparations run, threads joined) before what they use.
   WorkerPool preparations_{kPreparationThreads};
 };

@@ -113,6 +113,7 @@ IsostreamService::IsostreamService(const DaemonConfig& config)
 
 IsostreamService::~IsostreamService() {
   core_->shutting_down.store(true);  // a preload stops after the volume in progress
+  core_->catalogue.Stop();           // which gives up at its next check
   core_->JoinPreload();
   core_->StopIdleReaper();
   // Jobs first (they use the encoders), then the encoders.
@@ -214,6 +215,9 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* IsostreamService::S
 
 void IsostreamService::BeginShutdown() {
   core_->shutting_down.store(true);
+  // Views waiting for a preparation end now with UNAVAILABLE, and the preparation stops: it
+  // may take minutes, far past the grace period and a service manager's stop timeout.
+  core_->catalogue.Stop();
   std::vector<std::shared_ptr<StreamBase>> open;
   {
     std::lock_guard<std::mutex> lock(core_->streams_mu);

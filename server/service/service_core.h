@@ -77,7 +77,7 @@ struct ServiceCore {
   void StartIdleReaper();
   void StopIdleReaper();
   // config.preload: prepares the catalogue's volumes one by one on a thread of its own, until
-  // done or shutting down (a preparation in progress is not interrupted).
+  // done or shutting down (VolumeCatalogue::Stop ends the one in progress).
   void StartPreload();
   void JoinPreload();
 

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -196,6 +197,42 @@ TEST(SlowPreparation, ClientsThatGiveUpWaitingReleaseTheirSlots) {
   const std::string log = DaemonLog(dir);
   EXPECT_EQ(log.find("prepared volume 'a'"), log.rfind("prepared volume 'a'")) << log;
   EXPECT_EQ(daemon.Stop(), 0);
+}
+
+// SIGTERM while a view waits for a preparation (here 60 s long, past systemd's 15 s stop
+// timeout): the view ends at once with UNAVAILABLE saying the server is shutting down, and the
+// daemon exits promptly (0). It waited for the preparation to end, and its client saw the
+// connection drop ("cannot reach isostreamd").
+TEST(SlowPreparation, SigtermEndsViewsWaitingForItAndExitsPromptly) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  auto c = StartSlowlyPreparingDaemon({"--volume", "a=buckyball:33", "--no-preload"}, dir,
+                                      &daemon, 60000);
+  ASSERT_NE(c, nullptr) << DaemonLog(dir);
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  ASSERT_TRUE((*session)->Send(MakeView("a", 1, 0.01, glm::dvec3(2, 2, 2))).ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // waiting for the preparation
+  // The daemon is killed at worst by Stop's timeout, so the reader ends in bounded time.
+  absl::Status ended;
+  std::thread reader([&] {
+    pb::FrameChunk chunk;
+    while ((*session)->Read(&chunk)) {
+    }
+    ended = (*session)->Finish();
+  });
+  const auto sent = std::chrono::steady_clock::now();
+  const int code = daemon.Stop(SIGTERM, std::chrono::seconds(10));
+  const auto exit_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                           std::chrono::steady_clock::now() - sent)
+                           .count();
+  reader.join();
+  EXPECT_EQ(code, 0) << DaemonLog(dir);
+  EXPECT_LT(exit_ms, 3000) << DaemonLog(dir);
+  std::printf("SIGTERM to exit: %lld ms\n", static_cast<long long>(exit_ms));
+  EXPECT_EQ(ended.code(), absl::StatusCode::kUnavailable) << ended;
+  EXPECT_NE(ended.message().find("shutting down"), std::string::npos) << ended;
+  EXPECT_NE(DaemonLog(dir).find("stopped"), std::string::npos) << DaemonLog(dir);
 }
 
 }  // namespace
