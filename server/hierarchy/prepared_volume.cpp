@@ -25,7 +25,7 @@ absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const Volu
                                              const HierarchyBuildOptions& build) {
   PreparedVolume p;
   auto t0 = std::chrono::steady_clock::now();
-  ISOSTREAM_ASSIGN_OR_RETURN(p.volume, LoadVolume(spec, limits));
+  ISOSTREAM_ASSIGN_OR_RETURN(p.volume, LoadVolume(spec, limits, build.stop));
   p.load_s = Seconds(t0);
   ISOSTREAM_RETURN_IF_ERROR(StopRequested(build));
   t0 = std::chrono::steady_clock::now();

@@ -20,8 +20,8 @@ struct PreparedVolume {
   double load_s = 0, pad_s = 0, hierarchy_s = 0;
 };
 
-// build.stop, if set, also stops the preparation between its steps (CANCELLED); loading and
-// padding are not interrupted.
+// build.stop, if set, also stops the preparation (CANCELLED) between its steps and a
+// generator's slabs; reading a file and padding are not interrupted.
 absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const VolumeLimits& limits,
                                              const HierarchyCacheOptions& cache,
                                              const HierarchyBuildOptions& build);

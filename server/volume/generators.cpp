@@ -252,10 +252,12 @@ class NoiseRows {
 // samples of row (y = j, z = k). One call per row keeps dispatch out of the per-sample loop.
 template <typename RowFn>
 absl::StatusOr<VolumePtr> SampleRows(std::string_view spec, const char* grid_name, int n,
-                                     const RowFn& row) {
+                                     const std::atomic<bool>* stop, const RowFn& row) {
   DenseGridBuilder builder({n, n, n});
   std::vector<float> slab(builder.SlabSamples(0));
   for (int s = 0; s < builder.slab_count(); ++s) {
+    if (stop && stop->load(std::memory_order_relaxed))
+      return absl::CancelledError(std::string(spec) + ": generation stopped");
     const int rows = builder.SlabPlanes(s) * n;
     tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& r) {
       for (int q = r.begin(); q != r.end(); ++q) {
@@ -274,9 +276,9 @@ absl::StatusOr<VolumePtr> SampleRows(std::string_view spec, const char* grid_nam
 // Samples a point function row by row; fine for the closed forms that cost a few flops.
 template <typename PointFn>
 absl::StatusOr<VolumePtr> SamplePoints(std::string_view spec, const char* grid_name, int n,
-                                       PointFn f) {
+                                       const std::atomic<bool>* stop, PointFn f) {
   const std::vector<double> c = AxisCoordinates(n);
-  return SampleRows(spec, grid_name, n, [&](int j, int k, float* out) {
+  return SampleRows(spec, grid_name, n, stop, [&](int j, int k, float* out) {
     for (int i = 0; i < n; ++i) out[i] = static_cast<float>(f(c[i], c[j], c[k]));
   });
 }
@@ -318,28 +320,28 @@ double NoiseValue(double x, double y, double z, uint32_t seed) {
   return sum;
 }
 
-absl::StatusOr<VolumePtr> GenerateVolume(const VolumeSpec& spec) {
+absl::StatusOr<VolumePtr> GenerateVolume(const VolumeSpec& spec, const std::atomic<bool>* stop) {
   const std::string_view name = spec.generator;
   const int size = spec.n;
   if (name == "cayley") {
-    return SamplePoints(spec.text, "cayley", size,
+    return SamplePoints(spec.text, "cayley", size, stop,
                         [](double x, double y, double z) { return Cayley(x, y, z); });
   }
   if (name == "sphere") {
-    return SamplePoints(spec.text, "sphere", size,
+    return SamplePoints(spec.text, "sphere", size, stop,
                         [](double x, double y, double z) { return Radius(x, y, z); });
   }
   if (name == "shells") {
-    return SamplePoints(spec.text, "shells", size,
+    return SamplePoints(spec.text, "shells", size, stop,
                         [](double x, double y, double z) { return Shells(Radius(x, y, z)); });
   }
   if (name == "buckyball") {
     const BuckyballRows rows(AxisCoordinates(size));
-    return SampleRows(spec.text, "buckyball", size, rows);
+    return SampleRows(spec.text, "buckyball", size, stop, rows);
   }
   if (name == "noise") {
     const std::vector<double> coords = AxisCoordinates(size);
-    return SampleRows(spec.text, "noise", size, NoiseRows(coords, spec.seed));
+    return SampleRows(spec.text, "noise", size, stop, NoiseRows(coords, spec.seed));
   }
   return absl::NotFoundError("generator spec '" + spec.text + "': unknown generator '" +
                              spec.generator + "'");

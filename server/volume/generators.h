@@ -14,6 +14,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 
 #include "server/volume/volume.h"
@@ -88,7 +89,9 @@ double BuckyballValue(double x, double y, double z);
 double NoiseValue(double x, double y, double z, uint32_t seed);
 
 // Samples the generator a parsed spec names (ParseVolumeSpec has checked its name, N and seed
-// against the limits); the volume is named by the spec's text.
-absl::StatusOr<VolumePtr> GenerateVolume(const VolumeSpec& spec);
+// against the limits); the volume is named by the spec's text. `stop`, if set and true, ends
+// the sampling between slabs with CANCELLED (a 1025^3 volume takes seconds).
+absl::StatusOr<VolumePtr> GenerateVolume(const VolumeSpec& spec,
+                                         const std::atomic<bool>* stop = nullptr);
 
 }  // namespace isostream

@@ -11,11 +11,12 @@
 namespace isostream {
 namespace {
 
-absl::StatusOr<VolumePtr> LoadFromSpec(std::string_view spec, const VolumeLimits& limits) {
+absl::StatusOr<VolumePtr> LoadFromSpec(std::string_view spec, const VolumeLimits& limits,
+                                       const std::atomic<bool>* stop) {
   ISOSTREAM_ASSIGN_OR_RETURN(const VolumeSpec parsed, ParseVolumeSpec(spec, limits));
   switch (parsed.source) {
     case VolumeSource::kGenerator:
-      return GenerateVolume(parsed);
+      return GenerateVolume(parsed, stop);
     case VolumeSource::kVdbFile:
       return LoadVdbFile(parsed.text, parsed.path, parsed.grid_name, limits);
     case VolumeSource::kNiftiFile:
@@ -28,10 +29,11 @@ absl::StatusOr<VolumePtr> LoadFromSpec(std::string_view spec, const VolumeLimits
 
 }  // namespace
 
-absl::StatusOr<VolumePtr> LoadVolume(std::string_view spec, const VolumeLimits& limits) {
+absl::StatusOr<VolumePtr> LoadVolume(std::string_view spec, const VolumeLimits& limits,
+                                     const std::atomic<bool>* stop) {
   // The module edge: nothing thrown by OpenVDB, TBB or the standard library gets past here.
   try {
-    return LoadFromSpec(spec, limits);
+    return LoadFromSpec(spec, limits, stop);
   } catch (const std::bad_alloc&) {
     return absl::ResourceExhaustedError(std::string(spec) + ": out of memory while loading");
   } catch (const std::exception& e) {

@@ -13,6 +13,7 @@
 // first by ParseVolumeSpec (volume_spec.h), whose refusals come back unchanged.
 #pragma once
 
+#include <atomic>
 #include <string_view>
 
 #include "server/volume/volume.h"
@@ -20,7 +21,9 @@
 
 namespace isostream {
 
-absl::StatusOr<VolumePtr> LoadVolume(std::string_view spec, const VolumeLimits& limits = {});
+// `stop`, if set and true, ends a generator's sampling (GenerateVolume); files are read whole.
+absl::StatusOr<VolumePtr> LoadVolume(std::string_view spec, const VolumeLimits& limits = {},
+                                     const std::atomic<bool>* stop = nullptr);
 
 // The generator names LoadVolume understands, for help texts and catalogues.
 const char* const* GeneratorNames();  // null-terminated

@@ -1,10 +1,15 @@
 // PrepareVolume: the facts of the loaded volume, its samples in the hierarchy (equal to the
-// grid's, read directly), and the grid itself released once the hierarchy holds them.
+// grid's, read directly), the grid itself released once the hierarchy holds them, and giving
+// up when told to stop.
 #include "server/hierarchy/prepared_volume.h"
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+
+#include "server/hierarchy/hierarchy.h"
 #include "server/volume/load.h"
+#include "server/volume/padding.h"
 
 namespace isostream {
 namespace {
@@ -33,6 +38,33 @@ TEST(PrepareVolume, KeepsTheFactsAndTheSamplesAndReleasesTheGrid) {
                                                      v.index_min[2] + z)))
               << spec << " at " << x << "," << y << "," << z;
   }
+}
+
+// A stop flag that is set (a daemon shutting down) ends the generator's sampling, the
+// hierarchy build and so the whole preparation with CANCELLED; one that is clear changes
+// nothing.
+TEST(PrepareVolume, GivesUpWhenToldToStop) {
+  std::atomic<bool> stop{true};
+  HierarchyBuildOptions build;
+  build.stop = &stop;
+  const auto generated = LoadVolume("cayley:17", VolumeLimits{}, &stop);
+  EXPECT_EQ(generated.status().code(), absl::StatusCode::kCancelled) << generated.status();
+  auto loaded = LoadVolume("cayley:17");
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  auto padded = PadToHierarchyDomain(**loaded);
+  ASSERT_TRUE(padded.ok()) << padded.status();
+  const auto built = BuildHierarchy(std::move(*padded), build);
+  EXPECT_EQ(built.status().code(), absl::StatusCode::kCancelled) << built.status();
+  const auto prepared = PrepareVolume("cayley:17", VolumeLimits{}, HierarchyCacheOptions{}, build);
+  EXPECT_EQ(prepared.status().code(), absl::StatusCode::kCancelled) << prepared.status();
+
+  stop = false;
+  const auto whole = PrepareVolume("cayley:17", VolumeLimits{}, HierarchyCacheOptions{}, build);
+  ASSERT_TRUE(whole.ok()) << whole.status();
+  EXPECT_EQ(whole->hierarchy->sample(3, 5, 7), (*loaded)->grid->getConstAccessor().getValue(
+                                                    openvdb::Coord((*loaded)->index_min[0] + 3,
+                                                                   (*loaded)->index_min[1] + 5,
+                                                                   (*loaded)->index_min[2] + 7)));
 }
 
 }  // namespace
