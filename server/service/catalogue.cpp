@@ -75,6 +75,16 @@ uint64_t GeneratorStoreBytes(const std::string& spec) {
   return bricks * bricks * bricks * sizeof(HierarchyBrick);
 }
 
+// What a generator volume's preparation holds beside the store while it runs: its padded cube
+// of float samples, and a quarter more for the generated grid and what the build allocates
+// (measured peaks over the store: 548 MB at 513^3 = 1.01 x the cube's 540 MB, and 90 MB at
+// 257^3 = 1.32 x; BENCHMARKS.md).
+uint64_t GeneratorSampleBytes(const std::string& spec) {
+  const int n = std::stoi(spec.substr(spec.find(':') + 1));
+  const uint64_t cube = (uint64_t{1} << HierarchyLevelFor({n, n, n})) + 1;
+  return 5 * cube * cube * cube;
+}
+
 absl::Status ShuttingDown() {
   return absl::UnavailableError(
       "the server is shutting down (the volume was still being prepared); try again when it is "
@@ -179,17 +189,22 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
   HierarchyBuildOptions build;
   build.threads = options_.build_threads;
   build.stop = &stop_;
+  const bool generated = options_.volumes.empty();
+  const uint64_t sample_bytes = generated ? GeneratorSampleBytes(name) : 0;
+  const bool started = !generated || StartPreparation(name, sample_bytes);
   // The test hook stands for a slow preparation, so Stop cuts it short too.
   const auto delay_end = std::chrono::steady_clock::now() + options_.prepare_delay;
   while (!stop_.load() && std::chrono::steady_clock::now() < delay_end)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   absl::StatusOr<PreparedVolume> prepared = absl::CancelledError("preparation stopped");
-  if (!stop_.load()) prepared = PrepareVolume(spec, options_.limits, options_.cache, build);
+  if (started && !stop_.load())
+    prepared = PrepareVolume(spec, options_.limits, options_.cache, build);
   if (!prepared.ok() && stop_.load()) {
     // Given up for the shutdown, not failed: nothing to log as an error or to remember.
     ReturnFreedMemory();
     spdlog::info("preparing volume '{}' stopped: shutting down", name);
     std::lock_guard<std::mutex> lock(mu_);
+    if (generated && started) EndPreparationLocked(sample_bytes);
     entry->preparing = false;
     entry->failed = ShuttingDown();
     auto it = entries_.find(name);
@@ -205,8 +220,9 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
     spdlog::error("preparing volume '{}' ({}) failed: {}", name, spec,
                   std::string(prepared.status().message()));
     std::lock_guard<std::mutex> lock(mu_);
+    if (generated) EndPreparationLocked(sample_bytes);
     entry->preparing = false;
-    if (options_.volumes.empty()) {
+    if (generated) {
       // Nothing is held: its bytes must not keep other generated volumes out.
       auto it = entries_.find(name);
       if (it != entries_.end() && it->second == entry) entries_.erase(it);
@@ -240,8 +256,41 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
   prepared_.fetch_add(1);
   ReturnFreedMemory();  // what preparing freed (the volume's grid above all) is not reused
   std::lock_guard<std::mutex> lock(mu_);
+  if (generated) EndPreparationLocked(sample_bytes);
   entry->served = std::move(served);
   entry->preparing = false;
+  prepared_cv_.notify_all();
+}
+
+bool VolumeCatalogue::StartPreparation(const std::string& name, uint64_t sample_bytes) {
+  std::unique_lock<std::mutex> lock(mu_);
+  const uint64_t budget = options_.max_generator_bytes;
+  bool said = false;
+  for (;;) {
+    if (stop_.load()) return false;
+    // No volume is dropped for samples: they are gone in a minute, and the volume that would
+    // go first is often the one just prepared, its frame still being drawn.
+    if (generator_preparations_ == 0 ||
+        HeldBytesLocked() + preparation_bytes_ + sample_bytes <= budget)
+      break;
+    if (!said) {
+      spdlog::info(
+          "preparing volume '{}' waits for memory: {} of volumes held or being built, {} of "
+          "samples in preparations running, {} more needed, {} for generated volumes",
+          name, MiB(HeldBytesLocked()), MiB(preparation_bytes_), MiB(sample_bytes), MiB(budget));
+      said = true;
+    }
+    prepared_cv_.wait(lock);  // a preparation ended, or Stop
+  }
+  ++generator_preparations_;
+  preparation_bytes_ += sample_bytes;
+  spdlog::info("preparing volume '{}'", name);
+  return true;
+}
+
+void VolumeCatalogue::EndPreparationLocked(uint64_t sample_bytes) {
+  --generator_preparations_;
+  preparation_bytes_ -= sample_bytes;
   prepared_cv_.notify_all();
 }
 

@@ -130,6 +130,13 @@ class VolumeCatalogue {
   // `keep` cannot fit within the bytes.
   absl::Status MakeRoomLocked(const std::string& keep);
   uint64_t HeldBytesLocked() const;
+  // A generated volume's preparation holds its samples beside the store it builds: it starts
+  // once the stores held and the samples of the preparations running fit max_generator_bytes
+  // with its own, or when no other one runs (so held stores stay within the budget, and
+  // preparations' samples too unless one runs alone). False if the catalogue stopped
+  // meanwhile. EndPreparationLocked gives the bytes back.
+  bool StartPreparation(const std::string& name, uint64_t sample_bytes);
+  void EndPreparationLocked(uint64_t sample_bytes);
   CatalogueOptions options_;
   mutable std::mutex mu_;
   std::condition_variable prepared_cv_;  // a preparation ended
@@ -137,6 +144,8 @@ class VolumeCatalogue {
   std::atomic<int> prepared_{0};
   uint64_t use_clock_ = 0;
   std::atomic<bool> stop_{false};  // set under mu_, so that waiters cannot miss it
+  int generator_preparations_ = 0;     // running, under mu_
+  uint64_t preparation_bytes_ = 0;     // their samples (StartPreparation), under mu_
   // Declared last: destroyed (queued preparations run, threads joined) before what they use.
   WorkerPool preparations_{kPreparationThreads};
 };

@@ -4,6 +4,7 @@
 // starts its own daemon on 127.0.0.1 (daemon_process.h); every wait is bounded.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -233,6 +234,62 @@ TEST(SlowPreparation, SigtermEndsViewsWaitingForItAndExitsPromptly) {
   EXPECT_EQ(ended.code(), absl::StatusCode::kUnavailable) << ended;
   EXPECT_NE(ended.message().find("shutting down"), std::string::npos) << ended;
   EXPECT_NE(DaemonLog(dir).find("stopped"), std::string::npos) << DaemonLog(dir);
+}
+
+// Two generated 129^3 volumes asked for at once, each preparation slowed to 1.5 s: their
+// stores take 15.1 MiB each and their samples 10.3 MiB each while they are prepared. Under
+// --generator-mb 40 the stores fit together but the samples of both preparations do not, so
+// the second starts when the first has ended (two 513^3 preparations at once had peaked at
+// 2.40 GB under a 1.78 GB budget); under 60 they run at once. Returns the daemon's log.
+std::string PrepareTwoAtOnce(int generator_mb) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  auto c = StartSlowlyPreparingDaemon({"--generator-mb", std::to_string(generator_mb)}, dir,
+                                      &daemon);
+  if (c == nullptr) {
+    ADD_FAILURE() << DaemonLog(dir);
+    return "";
+  }
+  absl::Status got[2];
+  std::thread second([&] {
+    got[1] = c->Fetch(MakeView("sphere:129", 2, 0.01, glm::dvec3(2, 2, 2))).status();
+  });
+  got[0] = c->Fetch(MakeView("cayley:129", 1, 0.01, glm::dvec3(2, 2, 2))).status();
+  second.join();
+  EXPECT_TRUE(got[0].ok()) << got[0];
+  EXPECT_TRUE(got[1].ok()) << got[1];
+  EXPECT_EQ(daemon.Stop(), 0);
+  return DaemonLog(dir);
+}
+
+// Where `line` first appears in `log` (npos: nowhere), for the two volumes either way round.
+size_t At(const std::string& log, const std::string& line) { return log.find(line); }
+
+TEST(GeneratorBudget, PreparationsWhoseSamplesDoNotFitTogetherRunOneAfterTheOther) {
+  const std::string log = PrepareTwoAtOnce(40);
+  const size_t start[2] = {At(log, "preparing volume 'cayley:129'\n"),
+                           At(log, "preparing volume 'sphere:129'\n")};
+  const size_t end[2] = {At(log, "prepared volume 'cayley:129'"),
+                         At(log, "prepared volume 'sphere:129'")};
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_NE(start[i], std::string::npos) << log;
+    ASSERT_NE(end[i], std::string::npos) << log;
+  }
+  const int first = start[0] < start[1] ? 0 : 1;
+  EXPECT_LT(end[first], start[1 - first]) << log;
+  EXPECT_NE(log.find("waits for memory"), std::string::npos) << log;
+}
+
+TEST(GeneratorBudget, PreparationsThatFitTogetherRunAtOnce) {
+  const std::string log = PrepareTwoAtOnce(60);
+  const size_t second_start = std::max(At(log, "preparing volume 'cayley:129'\n"),
+                                       At(log, "preparing volume 'sphere:129'\n"));
+  const size_t first_end =
+      std::min(At(log, "prepared volume 'cayley:129'"), At(log, "prepared volume 'sphere:129'"));
+  ASSERT_NE(second_start, std::string::npos) << log;
+  ASSERT_NE(first_end, std::string::npos) << log;
+  EXPECT_LT(second_start, first_end) << log;
+  EXPECT_EQ(log.find("waits for memory"), std::string::npos) << log;
 }
 
 }  // namespace
