@@ -20,7 +20,15 @@ if ! strace -f -qq -o /dev/null true 2>/dev/null; then
   exit 77
 fi
 work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+tracer=""  # strace of the daemon running now, if any: a failed check must not leave it behind
+cleanup() {
+  if [ -n "$tracer" ]; then  # the daemon first: strace reaps it, then ends
+    pkill -KILL -P "$tracer" 2>/dev/null || true
+    wait "$tracer" 2>/dev/null || true
+  fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
 
 # 1-2. The unit as installed, but starting the built binary (verify wants it to exist).
 sed "s|^ExecStart=/usr/local/bin/isostreamd|ExecStart=$daemon|" "$unit" >"$work/isostreamd.service"
@@ -64,7 +72,7 @@ JSON
 serve() {  # one daemon lifetime under strace, with a few requests
   local log=$work/daemon$1.log
   strace -f -qq -o "$work/trace$1" "$daemon" --config "$work/config.json" >"$log" 2>&1 &
-  local tracer=$!
+  tracer=$!
   local address=""
   for _ in $(seq 300); do
     address=$(grep -o "listening on [^ ]*" "$log" | head -1 | awk '{print $3}') || true
@@ -85,9 +93,18 @@ serve() {  # one daemon lifetime under strace, with a few requests
     echo "check_unit: an unknown volume was served"
     exit 1
   fi
-  pkill -TERM -f "^$daemon --config $work/config.json" || true
-  wait "$tracer"
-  grep -q "stopped" "$log" || { cat "$log"; echo "check_unit: the daemon did not stop cleanly"; exit 1; }
+  local pid
+  pid=$(pgrep -P "$tracer") || { cat "$log"; echo "check_unit: the traced daemon is gone"; exit 1; }
+  kill -TERM "$pid"
+  local code=0
+  wait "$tracer" || code=$?
+  tracer=""
+  # strace exits with the daemon's status; "stopped" is the daemon's last line.
+  if [ "$code" != 0 ] || ! grep -q "\] stopped$" "$log"; then
+    cat "$log"
+    echo "check_unit: the daemon did not stop cleanly (exit $code)"
+    exit 1
+  fi
 }
 serve 1  # builds and caches both hierarchies
 serve 2  # reads them back
