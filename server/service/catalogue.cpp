@@ -172,16 +172,40 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
         std::chrono::steady_clock::now() - entry->failed_at < kRetryFailedAfter)
       return entry->failed;
     entry->preparing = true;
+    entry->started = false;
     entry->failed = absl::OkStatus();
     preparations_.Submit([this, name, entry] { Prepare(name, entry); });
   }
+  ++entry->waiters;
+  absl::StatusOr<ServedVolumePtr> outcome = ShuttingDown();
   for (;;) {
-    if (entry->served) return entry->served;
-    if (!entry->preparing) return entry->failed;
-    if (stop_.load()) return ShuttingDown();
-    if (cancelled && cancelled()) return absl::CancelledError("gave up waiting for the volume");
+    if (entry->served) {
+      outcome = entry->served;
+      break;
+    }
+    if (!entry->preparing) {
+      outcome = entry->failed;
+      break;
+    }
+    if (stop_.load()) break;
+    if (cancelled && cancelled()) {
+      outcome = absl::CancelledError("gave up waiting for the volume");
+      break;
+    }
     prepared_cv_.wait_for(lock, kCancelPoll);
   }
+  if (--entry->waiters == 0 && entry->preparing && !entry->started && !stop_.load())
+    AbandonLocked(name, entry);
+  return outcome;
+}
+
+void VolumeCatalogue::AbandonLocked(const std::string& name, const std::shared_ptr<Entry>& entry) {
+  spdlog::info("preparing volume '{}' dropped before it started: nobody waits for it", name);
+  entry->abandoned = true;
+  entry->preparing = false;
+  auto it = entries_.find(name);
+  if (it != entries_.end() && it->second == entry) entries_.erase(it);
+  prepared_cv_.notify_all();  // a job at the memory gate gives up
 }
 
 void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Entry>& entry) {
@@ -191,7 +215,18 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
   build.stop = &stop_;
   const bool generated = options_.volumes.empty();
   const uint64_t sample_bytes = generated ? GeneratorSampleBytes(name) : 0;
-  const bool started = !generated || StartPreparation(name, sample_bytes);
+  bool started = true;
+  if (generated) {
+    started = StartPreparation(name, entry, sample_bytes);
+    if (!started) {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (entry->abandoned) return;  // its entry is gone; otherwise stopped, as below
+    }
+  } else {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (entry->abandoned) return;
+    entry->started = true;
+  }
   // The test hook stands for a slow preparation, so Stop cuts it short too.
   const auto delay_end = std::chrono::steady_clock::now() + options_.prepare_delay;
   while (!stop_.load() && std::chrono::steady_clock::now() < delay_end)
@@ -262,12 +297,14 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
   prepared_cv_.notify_all();
 }
 
-bool VolumeCatalogue::StartPreparation(const std::string& name, uint64_t sample_bytes) {
+bool VolumeCatalogue::StartPreparation(const std::string& name,
+                                       const std::shared_ptr<Entry>& entry,
+                                       uint64_t sample_bytes) {
   std::unique_lock<std::mutex> lock(mu_);
   const uint64_t budget = options_.max_generator_bytes;
   bool said = false;
   for (;;) {
-    if (stop_.load()) return false;
+    if (entry->abandoned || stop_.load()) return false;
     // No volume is dropped for samples: they are gone in a minute, and the volume that would
     // go first is often the one just prepared, its frame still being drawn.
     if (generator_preparations_ == 0 ||
@@ -284,6 +321,7 @@ bool VolumeCatalogue::StartPreparation(const std::string& name, uint64_t sample_
   }
   ++generator_preparations_;
   preparation_bytes_ += sample_bytes;
+  entry->started = true;
   spdlog::info("preparing volume '{}'", name);
   return true;
 }

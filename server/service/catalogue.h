@@ -107,6 +107,9 @@ class VolumeCatalogue {
   struct Entry {
     ServedVolumePtr served;
     bool preparing = false;  // a preparation job is queued or running: one per volume
+    bool started = false;    // that job got past its queue (and, generated, the memory gate)
+    bool abandoned = false;  // dropped before it started: its job, when it runs, does nothing
+    int waiters = 0;         // Get calls waiting for the preparation
     uint64_t store_bytes = 0;  // of a generator volume, known from its spec before preparing
     uint64_t last_use = 0;
     // Why the last preparation failed, for the callers that waited for it. A catalogue entry
@@ -120,9 +123,14 @@ class VolumeCatalogue {
   // left may wait for its slot.
   static constexpr std::chrono::milliseconds kCancelPoll{50};
   // Preparations run at once (more wait in line). Each uses every core already (TBB); a few
-  // keep a small volume from waiting behind a large one. Preparations hold no session slot, so
-  // this, not --max-sessions, bounds them.
+  // keep a small volume from waiting behind a large one. Preparations hold no session slot: a
+  // started one goes on for the next client, but one still in line when its last waiter gives
+  // up is dropped (AbandonLocked), so clients that come and go cannot queue work beyond these
+  // threads.
   static constexpr int kPreparationThreads = 4;
+  // The last waiter of a preparation not started yet gave up: the entry goes (a later request
+  // starts afresh) and its job will find nothing to do.
+  void AbandonLocked(const std::string& name, const std::shared_ptr<Entry>& entry);
   // Runs on a preparation thread: prepares `name` and hands the outcome to `entry`'s waiters.
   void Prepare(const std::string& name, const std::shared_ptr<Entry>& entry);
   // Drops idle generator volumes, least recently used first, until those left (`keep`
@@ -134,8 +142,9 @@ class VolumeCatalogue {
   // once the stores held and the samples of the preparations running fit max_generator_bytes
   // with its own, or when no other one runs (so held stores stay within the budget, and
   // preparations' samples too unless one runs alone). False if the catalogue stopped
-  // meanwhile. EndPreparationLocked gives the bytes back.
-  bool StartPreparation(const std::string& name, uint64_t sample_bytes);
+  // or the preparation was abandoned meanwhile. EndPreparationLocked gives the bytes back.
+  bool StartPreparation(const std::string& name, const std::shared_ptr<Entry>& entry,
+                        uint64_t sample_bytes);
   void EndPreparationLocked(uint64_t sample_bytes);
   CatalogueOptions options_;
   mutable std::mutex mu_;

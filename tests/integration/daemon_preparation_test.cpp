@@ -292,5 +292,44 @@ TEST(GeneratorBudget, PreparationsThatFitTogetherRunAtOnce) {
   EXPECT_EQ(log.find("waits for memory"), std::string::npos) << log;
 }
 
+// Clients that each ask for a volume of their own and give up after 100 ms, one after the
+// other through the only slot, while every preparation takes 5 s: the four preparation
+// threads take the first four, and the others, still in line when their clients leave, are
+// dropped. They had all run, one client's short visit costing a whole preparation each (12 of
+// 12 here), so coming and going queued work without bound.
+TEST(SlowPreparation, PreparationsNobodyWaitsForAnyMoreAreDroppedBeforeTheyStart) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  auto c = StartSlowlyPreparingDaemon({"--max-sessions", "1"}, dir, &daemon, 5000);
+  ASSERT_NE(c, nullptr) << DaemonLog(dir);
+  net::ClientOptions impatient;
+  impatient.address = daemon.address();
+  impatient.call_timeout = std::chrono::milliseconds(100);
+  constexpr int kClients = 12;
+  for (int seed = 2; seed <= kClients + 1; ++seed) {  // (seed 1 is named noise:33)
+    ASSERT_TRUE(WaitForOpenSessions(*c, 0, std::chrono::steady_clock::now() +
+                                               std::chrono::seconds(2)));
+    auto i = net::Client::Connect(impatient);
+    ASSERT_TRUE(i.ok());
+    const std::string volume = "noise:33:" + std::to_string(seed);
+    auto frame = (*i)->Fetch(MakeView(volume, 1, 0.01, glm::dvec3(2, 2, 2)));
+    EXPECT_EQ(frame.status().code(), absl::StatusCode::kDeadlineExceeded) << frame.status();
+  }
+  // The last one's waiter has noticed too.
+  ASSERT_TRUE(WaitForOpenSessions(*c, 0, std::chrono::steady_clock::now() +
+                                             std::chrono::seconds(2)));
+  EXPECT_EQ(daemon.Stop(), 0);
+  const std::string log = DaemonLog(dir);
+  int started = 0, dropped = 0;
+  for (int seed = 2; seed <= kClients + 1; ++seed) {
+    const std::string volume = "'noise:33:" + std::to_string(seed) + "'";
+    started += log.find("preparing volume " + volume + "\n") != std::string::npos;
+    dropped += log.find("preparing volume " + volume + " dropped before it started") !=
+               std::string::npos;
+  }
+  EXPECT_EQ(started, 4) << log;
+  EXPECT_EQ(dropped, kClients - 4) << log;
+}
+
 }  // namespace
 }  // namespace isostream::testing
