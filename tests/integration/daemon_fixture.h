@@ -95,6 +95,17 @@ inline std::string DaemonLog(const ScratchDir& scratch) {
   return std::string((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
 }
 
+// Polls the daemon's open sessions until `open` (true) or `until` has passed (false).
+inline bool WaitForOpenSessions(net::Client& c, int64_t open,
+                                std::chrono::steady_clock::time_point until) {
+  for (;;) {
+    const auto stats = c.GetServerStats();
+    if (stats.ok() && stats->sessions_open() == open) return true;
+    if (std::chrono::steady_clock::now() >= until) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
 class Daemon : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {

@@ -133,16 +133,6 @@ TEST(SlowPreparation, AViewSupersededWhileItsPreparationFailsIsCancelled) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
-// Polls the daemon's open sessions until `open` (true) or `until` has passed (false).
-bool WaitForOpenSessions(net::Client& c, int64_t open, std::chrono::steady_clock::time_point until) {
-  for (;;) {
-    const auto stats = c.GetServerStats();
-    if (stats.ok() && stats->sessions_open() == open) return true;
-    if (std::chrono::steady_clock::now() >= until) return false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-}
-
 // Clients that give up while their view or volume-info call waits for a preparation (here
 // 8 s long) give their --max-sessions slot back at once, not when the preparation ends: they
 // held it (a 1025^3 volume takes minutes), so a few impatient clients locked everyone out. The
