@@ -13,9 +13,13 @@
 // It keeps it per arena, though: glibc gives threads up to 8 heaps per core, and each kept the
 // peak of the frames and preparations its threads happened to run. isostreamd's RSS climbed from
 // 230 MB to 600-700 MB over 24-45 prepare/evict cycles of 257^3 volumes with --generator-mb 150
-// (tests/bench/daemon_rss_cycles.sh); with one arena per core it stays at 170-250 MB, the held
-// volume plus one frame's buffers. The hot paths do not allocate: bench_stream's frame times
-// with 2 arenas were within its run-to-run spread of the default's.
+// (tests/bench/daemon_rss_cycles.sh); with 2 arenas (this 2-core machine's cores) it stays at
+// 170-250 MB, the held volume plus one frame's buffers. One arena per core, and never more than
+// 8: on a large host one per core would again be about one per thread (frame jobs, encoders,
+// preparations, TBB and gRPC), which is what let the peaks pile up. The hot paths do not
+// allocate: bench_stream's frame times with 2 arenas were within its run-to-run spread of the
+// default's; more threads than arenas may wait on malloc's locks, but only between nodes'
+// work, when a frame, chunk or preparation starts or grows.
 #pragma once
 
 #include <malloc.h>
@@ -28,7 +32,7 @@ namespace isostream {
 inline void KeepFreedMemoryForReuse() {
   mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's largest allowed value on 64-bit
   mallopt(M_TRIM_THRESHOLD, 1 << 30);
-  mallopt(M_ARENA_MAX, int(std::max(2u, std::thread::hardware_concurrency())));
+  mallopt(M_ARENA_MAX, int(std::clamp(std::thread::hardware_concurrency(), 2u, 8u)));
 }
 
 // Gives the heap's free pages back to the system now: after a rare event that freed much more
