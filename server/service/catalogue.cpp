@@ -76,13 +76,13 @@ uint64_t GeneratorStoreBytes(const std::string& spec) {
 }
 
 // What a generator volume's preparation holds beside the store while it runs: its padded cube
-// of float samples, and a quarter more for the generated grid and what the build allocates
+// of float samples, and half as much again for the generated grid and what the build allocates
 // (measured peaks over the store: 548 MB at 513^3 = 1.01 x the cube's 540 MB, and 90 MB at
 // 257^3 = 1.32 x; BENCHMARKS.md).
 uint64_t GeneratorSampleBytes(const std::string& spec) {
   const int n = std::stoi(spec.substr(spec.find(':') + 1));
   const uint64_t cube = (uint64_t{1} << HierarchyLevelFor({n, n, n})) + 1;
-  return 5 * cube * cube * cube;
+  return 6 * cube * cube * cube;
 }
 
 absl::Status ShuttingDown() {

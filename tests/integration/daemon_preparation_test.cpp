@@ -227,7 +227,7 @@ TEST(SlowPreparation, SigtermEndsViewsWaitingForItAndExitsPromptly) {
 }
 
 // Two generated 129^3 volumes asked for at once, each preparation slowed to 1.5 s: their
-// stores take 15.1 MiB each and their samples 10.3 MiB each while they are prepared. Under
+// stores take 14.4 MiB each and their samples 12.3 MiB each while they are prepared. Under
 // --generator-mb 40 the stores fit together but the samples of both preparations do not, so
 // the second starts when the first has ended (two 513^3 preparations at once had peaked at
 // 2.40 GB under a 1.78 GB budget); under 60 they run at once. Returns the daemon's log.
