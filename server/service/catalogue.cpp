@@ -169,7 +169,7 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
   if (entry->served) return entry->served;
   if (!entry->preparing) {
     if (!entry->failed.ok() &&
-        std::chrono::steady_clock::now() - entry->failed_at < kRetryFailedAfter)
+        std::chrono::steady_clock::now() - entry->failed_at < options_.retry_failed_after)
       return entry->failed;
     entry->preparing = true;
     entry->started = false;

@@ -65,6 +65,9 @@ struct CatalogueOptions {
   // that is slow to prepare without big data (isostreamd takes it from the environment
   // variable ISOSTREAMD_TEST_PREPARE_DELAY_MS).
   std::chrono::milliseconds prepare_delay{0};
+  // How long a catalogue entry that failed to prepare answers with that failure before it is
+  // tried again (a test hook shortens it: ISOSTREAMD_TEST_RETRY_FAILED_MS).
+  std::chrono::milliseconds retry_failed_after{30000};
 };
 
 // The box and bit count for a volume's frames: bits = the fewest that make the quantization
@@ -113,12 +116,11 @@ class VolumeCatalogue {
     uint64_t store_bytes = 0;  // of a generator volume, known from its spec before preparing
     uint64_t last_use = 0;
     // Why the last preparation failed, for the callers that waited for it. A catalogue entry
-    // also keeps it as the answer until kRetryFailedAfter has passed, so that clients asking
+    // also keeps it as the answer until retry_failed_after has passed, so that clients asking
     // again do not re-read a bad file and fill the log each time.
     absl::Status failed;
     std::chrono::steady_clock::time_point failed_at;
   };
-  static constexpr std::chrono::seconds kRetryFailedAfter{30};
   // How often a waiting caller asks whether it gave up: well within the second a client that
   // left may wait for its slot.
   static constexpr std::chrono::milliseconds kCancelPoll{50};

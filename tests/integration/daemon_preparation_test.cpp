@@ -321,5 +321,48 @@ TEST(SlowPreparation, PreparationsNobodyWaitsForAnyMoreAreDroppedBeforeTheyStart
   EXPECT_EQ(dropped, kClients - 4) << log;
 }
 
+// A catalogue entry that failed to prepare answers with that failure, without reading its file
+// again, until the retry time has passed (30 s; 1 s here, through ISOSTREAMD_TEST_RETRY_FAILED_MS),
+// and is then prepared afresh: a file put right is served without restarting the daemon.
+TEST(CatalogueFailure, IsRememberedUntilTheRetryTimeThenTriedAgain) {
+  ScratchDir dir;
+  const std::string raw = dir.path() + "/late.raw";
+  DaemonProcess daemon;
+  setenv("ISOSTREAMD_TEST_RETRY_FAILED_MS", "1000", 1);
+  const bool up = daemon.Start({"--volume", "late=raw:" + raw + ":9x9x9:uint8", "--no-preload",
+                                "--no-cache"},
+                               dir.path() + "/isostreamd.log");
+  unsetenv("ISOSTREAMD_TEST_RETRY_FAILED_MS");
+  ASSERT_TRUE(up) << DaemonLog(dir);
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  auto failures = [&] {  // "preparing volume 'late' (SPEC) failed: ..." lines
+    const std::string log = DaemonLog(dir), line = "' (raw:" + raw + ":9x9x9:uint8) failed: ";
+    int n = 0;
+    for (size_t at = log.find(line); at != std::string::npos; at = log.find(line, at + 1)) ++n;
+    return n;
+  };
+  const auto first = std::chrono::steady_clock::now();
+  EXPECT_EQ((*c)->GetVolumeInfo("late").status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(failures(), 1) << DaemonLog(dir);
+  {
+    std::ofstream file(raw, std::ios::binary);
+    for (int i = 0; i < 9 * 9 * 9; ++i) file.put(char(i % 9 < 4 ? 10 : 200));
+  }
+  // The file is there now, but the failure is remembered: not read again.
+  EXPECT_EQ((*c)->GetVolumeInfo("late").status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(failures(), 1) << DaemonLog(dir);
+  ASSERT_LT(std::chrono::steady_clock::now() - first, std::chrono::milliseconds(900))
+      << "too slow to see the remembered failure";
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  auto info = (*c)->GetVolumeInfo("late");
+  ASSERT_TRUE(info.ok()) << info.status() << "\n" << DaemonLog(dir);
+  EXPECT_EQ(info->dims(0), 9);
+  EXPECT_EQ(failures(), 1) << DaemonLog(dir);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 }  // namespace
 }  // namespace isostream::testing
