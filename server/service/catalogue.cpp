@@ -302,23 +302,33 @@ bool VolumeCatalogue::StartPreparation(const std::string& name,
                                        uint64_t sample_bytes) {
   std::unique_lock<std::mutex> lock(mu_);
   const uint64_t budget = options_.max_generator_bytes;
-  bool said = false;
+  // In arrival order: a volume that fits only when fewer run must not be passed for good by
+  // smaller ones that keep fitting beside the others.
+  gate_.push_back(entry.get());
+  bool said = false, start = false;
   for (;;) {
-    if (entry->abandoned || stop_.load()) return false;
+    if (entry->abandoned || stop_.load()) break;
     // No volume is dropped for samples: they are gone in a minute, and the volume that would
     // go first is often the one just prepared, its frame still being drawn.
-    if (generator_preparations_ == 0 ||
-        HeldBytesLocked() + preparation_bytes_ + sample_bytes <= budget)
+    if (gate_.front() == entry.get() &&
+        (generator_preparations_ == 0 ||
+         HeldBytesLocked() + preparation_bytes_ + sample_bytes <= budget)) {
+      start = true;
       break;
+    }
     if (!said) {
       spdlog::info(
           "preparing volume '{}' waits for memory: {} of volumes held or being built, {} of "
-          "samples in preparations running, {} more needed, {} for generated volumes",
-          name, MiB(HeldBytesLocked()), MiB(preparation_bytes_), MiB(sample_bytes), MiB(budget));
+          "samples in preparations running, {} more needed, {} for generated volumes{}",
+          name, MiB(HeldBytesLocked()), MiB(preparation_bytes_), MiB(sample_bytes), MiB(budget),
+          gate_.front() == entry.get() ? "" : ", behind others waiting");
       said = true;
     }
-    prepared_cv_.wait(lock);  // a preparation ended, or Stop
+    prepared_cv_.wait(lock);  // a preparation started or ended, one was dropped, or Stop
   }
+  gate_.erase(std::find(gate_.begin(), gate_.end(), entry.get()));
+  prepared_cv_.notify_all();  // the next in line may go now
+  if (!start) return false;
   ++generator_preparations_;
   preparation_bytes_ += sample_bytes;
   entry->started = true;

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
+#include <deque>
 #include <functional>
 #include <map>
 #include <memory>
@@ -143,8 +144,9 @@ class VolumeCatalogue {
   // A generated volume's preparation holds its samples beside the store it builds: it starts
   // once the stores held and the samples of the preparations running fit max_generator_bytes
   // with its own, or when no other one runs (so held stores stay within the budget, and
-  // preparations' samples too unless one runs alone). False if the catalogue stopped
-  // or the preparation was abandoned meanwhile. EndPreparationLocked gives the bytes back.
+  // preparations' samples too unless one runs alone); in arrival order. False if the catalogue
+  // stopped or the preparation was abandoned meanwhile. EndPreparationLocked gives the bytes
+  // back.
   bool StartPreparation(const std::string& name, const std::shared_ptr<Entry>& entry,
                         uint64_t sample_bytes);
   void EndPreparationLocked(uint64_t sample_bytes);
@@ -156,6 +158,7 @@ class VolumeCatalogue {
   uint64_t use_clock_ = 0;
   std::atomic<bool> stop_{false};  // set under mu_, so that waiters cannot miss it
   int generator_preparations_ = 0;     // running, under mu_
+  std::deque<const Entry*> gate_;      // waiting at StartPreparation, in arrival order, under mu_
   uint64_t preparation_bytes_ = 0;     // their samples (StartPreparation), under mu_
   // Declared last: destroyed (queued preparations run, threads joined) before what they use.
   WorkerPool preparations_{kPreparationThreads};

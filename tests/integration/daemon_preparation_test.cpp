@@ -270,6 +270,37 @@ TEST(GeneratorBudget, PreparationsWhoseSamplesDoNotFitTogetherRunOneAfterTheOthe
   EXPECT_NE(log.find("waits for memory"), std::string::npos) << log;
 }
 
+// In arrival order: under 30 MiB, cayley:129 (14.4 MiB store, 12.3 MiB samples) cannot start
+// beside sphere:65 (2.1 + 1.6 MiB), so it waits; buckyball:65, asked for next, would fit beside
+// sphere:65 but waits behind it, or a stream of small volumes could keep a large one out for
+// good. Each preparation takes 1.5 s; the requests come 0.3 s apart.
+TEST(GeneratorBudget, PreparationsStartInTheOrderTheyWereAskedFor) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  auto c = StartSlowlyPreparingDaemon({"--generator-mb", "30"}, dir, &daemon);
+  ASSERT_NE(c, nullptr) << DaemonLog(dir);
+  const std::string volumes[3] = {"sphere:65", "cayley:129", "buckyball:65"};
+  absl::Status got[3];
+  std::vector<std::thread> clients;
+  for (int i = 0; i < 3; ++i) {
+    clients.emplace_back([&, i] {
+      got[i] = c->Fetch(MakeView(volumes[i], 1, 0.01, glm::dvec3(2, 2, 2))).status();
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  }
+  for (auto& t : clients) t.join();
+  EXPECT_EQ(daemon.Stop(), 0);
+  const std::string log = DaemonLog(dir);
+  size_t start[3];
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_TRUE(got[i].ok()) << volumes[i] << ": " << got[i];
+    start[i] = At(log, "preparing volume '" + volumes[i] + "'\n");
+    ASSERT_NE(start[i], std::string::npos) << log;
+  }
+  EXPECT_LT(start[0], start[1]) << log;
+  EXPECT_LT(start[1], start[2]) << log;
+}
+
 TEST(GeneratorBudget, PreparationsThatFitTogetherRunAtOnce) {
   const std::string log = PrepareTwoAtOnce(60);
   const size_t second_start = std::max(At(log, "preparing volume 'cayley:129'\n"),
