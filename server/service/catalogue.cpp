@@ -66,12 +66,16 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim,
   return absl::OkStatus();
 }
 
-// What a generator volume's hierarchy store will take (Check has accepted the spec): nearly
-// all a prepared volume holds, known before preparing it.
-uint64_t GeneratorStoreBytes(const std::string& spec) {
+// The hierarchy cube of a generator spec Check has accepted.
+uint64_t GeneratorCube(const std::string& spec) {
   const int n = std::stoi(spec.substr(spec.find(':') + 1));  // stops at a noise seed's ':'
-  const uint64_t cube = (uint64_t{1} << HierarchyLevelFor({n, n, n})) + 1;
-  const uint64_t bricks = (cube + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
+  return (uint64_t{1} << HierarchyLevelFor({n, n, n})) + 1;
+}
+
+// What a generator volume's hierarchy store will take: nearly all a prepared volume holds,
+// known before preparing it.
+uint64_t GeneratorStoreBytes(const std::string& spec) {
+  const uint64_t bricks = (GeneratorCube(spec) + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
   return bricks * bricks * bricks * sizeof(HierarchyBrick);
 }
 
@@ -80,8 +84,7 @@ uint64_t GeneratorStoreBytes(const std::string& spec) {
 // (measured peaks over the store: 548 MB at 513^3 = 1.01 x the cube's 540 MB, and 90 MB at
 // 257^3 = 1.32 x; BENCHMARKS.md).
 uint64_t GeneratorSampleBytes(const std::string& spec) {
-  const int n = std::stoi(spec.substr(spec.find(':') + 1));
-  const uint64_t cube = (uint64_t{1} << HierarchyLevelFor({n, n, n})) + 1;
+  const uint64_t cube = GeneratorCube(spec);
   return 6 * cube * cube * cube;
 }
 
@@ -203,97 +206,92 @@ void VolumeCatalogue::AbandonLocked(const std::string& name, const std::shared_p
   spdlog::info("preparing volume '{}' dropped before it started: nobody waits for it", name);
   entry->abandoned = true;
   entry->preparing = false;
-  auto it = entries_.find(name);
-  if (it != entries_.end() && it->second == entry) entries_.erase(it);
+  EraseIfCurrentLocked(name, entry);
   prepared_cv_.notify_all();  // a job at the memory gate gives up
 }
 
+void VolumeCatalogue::EraseIfCurrentLocked(const std::string& name,
+                                           const std::shared_ptr<Entry>& entry) {
+  auto it = entries_.find(name);
+  if (it != entries_.end() && it->second == entry) entries_.erase(it);
+}
+
 void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Entry>& entry) {
-  const std::string spec = options_.volumes.empty() ? name : options_.volumes.at(name);
-  HierarchyBuildOptions build;
-  build.threads = options_.build_threads;
-  build.stop = &stop_;
   const bool generated = options_.volumes.empty();
+  const std::string spec = generated ? name : options_.volumes.at(name);
+  // Catalogue volumes are outside the generators' budget: they pass the gate in order only.
   const uint64_t sample_bytes = generated ? GeneratorSampleBytes(name) : 0;
-  bool started = true;
-  if (generated) {
-    started = StartPreparation(name, entry, sample_bytes);
-    if (!started) {
-      std::lock_guard<std::mutex> lock(mu_);
-      if (entry->abandoned) return;  // its entry is gone; otherwise stopped, as below
-    }
-  } else {
+  const bool started = StartPreparation(name, entry, sample_bytes);
+  if (!started) {
     std::lock_guard<std::mutex> lock(mu_);
-    if (entry->abandoned) return;
-    entry->started = true;
+    if (entry->abandoned) return;  // its entry is gone; otherwise stopped, as below
   }
   // The test hook stands for a slow preparation, so Stop cuts it short too.
   const auto delay_end = std::chrono::steady_clock::now() + options_.prepare_delay;
   while (!stop_.load() && std::chrono::steady_clock::now() < delay_end)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  HierarchyBuildOptions build;
+  build.threads = options_.build_threads;
+  build.stop = &stop_;
   absl::StatusOr<PreparedVolume> prepared = absl::CancelledError("preparation stopped");
   if (started && !stop_.load())
     prepared = PrepareVolume(spec, options_.limits, options_.cache, build);
-  if (!prepared.ok() && stop_.load()) {
+  const bool stopped = !prepared.ok() && stop_.load();
+  ServedVolumePtr served;
+  absl::Status failed;
+  if (stopped) {
     // Given up for the shutdown, not failed: nothing to log as an error or to remember.
     ReturnFreedMemory();
     spdlog::info("preparing volume '{}' stopped: shutting down", name);
-    std::lock_guard<std::mutex> lock(mu_);
-    if (generated && started) EndPreparationLocked(sample_bytes);
-    entry->preparing = false;
-    entry->failed = ShuttingDown();
-    auto it = entries_.find(name);
-    if (it != entries_.end() && it->second == entry) entries_.erase(it);
-    prepared_cv_.notify_all();
-    return;
-  }
-  if (!prepared.ok()) {
+    failed = ShuttingDown();
+  } else if (!prepared.ok()) {
     // A preparation that failed part way freed what it had made: the grid's leaves are heap
     // blocks, which the untrimmed heap (malloc_tuning.h) kept (after padding 'sphere:1025'
     // ran out of memory the daemon stayed at 4.7 GB).
     ReturnFreedMemory();
     spdlog::error("preparing volume '{}' ({}) failed: {}", name, spec,
                   std::string(prepared.status().message()));
-    std::lock_guard<std::mutex> lock(mu_);
-    if (generated) EndPreparationLocked(sample_bytes);
-    entry->preparing = false;
-    if (generated) {
-      // Nothing is held: its bytes must not keep other generated volumes out.
-      auto it = entries_.find(name);
-      if (it != entries_.end() && it->second == entry) entries_.erase(it);
-      entry->failed = prepared.status();
-    } else {
-      // The message names the spec, which the operator wrote: it stays in the log for
-      // catalogue entries and is not shown to clients. Nor is its code: the client's request
-      // was right (INVALID_ARGUMENT made the viewer call it an argument error).
-      entry->failed = absl::FailedPreconditionError(
-          "volume " + Quoted(name) + " could not be prepared on the daemon (see its log)");
-      entry->failed_at = std::chrono::steady_clock::now();  // a slow failure gets its 30 s too
-    }
-    prepared_cv_.notify_all();
-    return;
+    // A catalogue entry's message names the spec, which the operator wrote: it stays in the
+    // log and is not shown to clients. Nor is its code: the client's request was right
+    // (INVALID_ARGUMENT made the viewer call it an argument error).
+    failed = generated ? prepared.status()
+                       : absl::FailedPreconditionError("volume " + Quoted(name) +
+                                                       " could not be prepared on the daemon "
+                                                       "(see its log)");
+  } else {
+    auto volume = std::make_shared<ServedVolume>();
+    volume->name = name;
+    volume->prepared = std::move(*prepared);
+    QuantizationFor(*volume->prepared.volume, &volume->box, &volume->position_bits);
+    volume->position_error = PositionErrorBound(volume->box, volume->position_bits);
+    spdlog::info(
+        "prepared volume '{}': {}x{}x{}, hierarchy {} in {:.0f} ms, {} position bits", name,
+        volume->prepared.volume->dims[0], volume->prepared.volume->dims[1],
+        volume->prepared.volume->dims[2], CacheOutcomeName(volume->prepared.cache),
+        1e3 * (volume->prepared.load_s + volume->prepared.pad_s + volume->prepared.hierarchy_s),
+        volume->position_bits);
+    // A cache the daemon cannot write to rebuilds every hierarchy at every start: say so.
+    const std::string& note = volume->prepared.cache_note;
+    if (note.find("not stored") != std::string::npos)
+      spdlog::warn("volume '{}': hierarchy cache: {}", name, note);
+    prepared_.fetch_add(1);
+    ReturnFreedMemory();  // what preparing freed (the volume's grid above all) is not reused
+    served = std::move(volume);
   }
-  auto served = std::make_shared<ServedVolume>();
-  served->name = name;
-  served->prepared = std::move(*prepared);
-  QuantizationFor(*served->prepared.volume, &served->box, &served->position_bits);
-  served->position_error = PositionErrorBound(served->box, served->position_bits);
-  spdlog::info(
-      "prepared volume '{}': {}x{}x{}, hierarchy {} in {:.0f} ms, {} position bits", name,
-      served->prepared.volume->dims[0], served->prepared.volume->dims[1],
-      served->prepared.volume->dims[2], CacheOutcomeName(served->prepared.cache),
-      1e3 * (served->prepared.load_s + served->prepared.pad_s + served->prepared.hierarchy_s),
-      served->position_bits);
-  // A cache the daemon cannot write to rebuilds every hierarchy at every start: say so.
-  const std::string& note = served->prepared.cache_note;
-  if (note.find("not stored") != std::string::npos)
-    spdlog::warn("volume '{}': hierarchy cache: {}", name, note);
-  prepared_.fetch_add(1);
-  ReturnFreedMemory();  // what preparing freed (the volume's grid above all) is not reused
   std::lock_guard<std::mutex> lock(mu_);
-  if (generated) EndPreparationLocked(sample_bytes);
-  entry->served = std::move(served);
+  if (started) EndPreparationLocked(sample_bytes);
   entry->preparing = false;
+  if (served) {
+    entry->served = std::move(served);
+  } else {
+    entry->failed = failed;
+    if (stopped || generated) {
+      // Nothing is held: a generated volume's bytes must not keep others out.
+      EraseIfCurrentLocked(name, entry);
+    } else {
+      entry->failed_at = std::chrono::steady_clock::now();  // a slow failure gets its wait too
+    }
+  }
   prepared_cv_.notify_all();
 }
 
@@ -311,12 +309,12 @@ bool VolumeCatalogue::StartPreparation(const std::string& name,
     // No volume is dropped for samples: they are gone in a minute, and the volume that would
     // go first is often the one just prepared, its frame still being drawn.
     if (gate_.front() == entry.get() &&
-        (generator_preparations_ == 0 ||
+        (preparations_running_ == 0 ||
          HeldBytesLocked() + preparation_bytes_ + sample_bytes <= budget)) {
       start = true;
       break;
     }
-    if (!said) {
+    if (!said && sample_bytes > 0) {  // (a catalogue volume waits only for its turn)
       spdlog::info(
           "preparing volume '{}' waits for memory: {} of volumes held or being built, {} of "
           "samples in preparations running, {} more needed, {} for generated volumes{}",
@@ -329,7 +327,7 @@ bool VolumeCatalogue::StartPreparation(const std::string& name,
   gate_.erase(std::find(gate_.begin(), gate_.end(), entry.get()));
   prepared_cv_.notify_all();  // the next in line may go now
   if (!start) return false;
-  ++generator_preparations_;
+  ++preparations_running_;
   preparation_bytes_ += sample_bytes;
   entry->started = true;
   spdlog::info("preparing volume '{}'", name);
@@ -337,7 +335,7 @@ bool VolumeCatalogue::StartPreparation(const std::string& name,
 }
 
 void VolumeCatalogue::EndPreparationLocked(uint64_t sample_bytes) {
-  --generator_preparations_;
+  --preparations_running_;
   preparation_bytes_ -= sample_bytes;
   prepared_cv_.notify_all();
 }

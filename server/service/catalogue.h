@@ -111,7 +111,7 @@ class VolumeCatalogue {
   struct Entry {
     ServedVolumePtr served;
     bool preparing = false;  // a preparation job is queued or running: one per volume
-    bool started = false;    // that job got past its queue (and, generated, the memory gate)
+    bool started = false;    // that job got past its queue and the memory gate
     bool abandoned = false;  // dropped before it started: its job, when it runs, does nothing
     int waiters = 0;         // Get calls waiting for the preparation
     uint64_t store_bytes = 0;  // of a generator volume, known from its spec before preparing
@@ -134,6 +134,8 @@ class VolumeCatalogue {
   // The last waiter of a preparation not started yet gave up: the entry goes (a later request
   // starts afresh) and its job will find nothing to do.
   void AbandonLocked(const std::string& name, const std::shared_ptr<Entry>& entry);
+  // Removes `entry` from the map unless a later request has put another under its name.
+  void EraseIfCurrentLocked(const std::string& name, const std::shared_ptr<Entry>& entry);
   // Runs on a preparation thread: prepares `name` and hands the outcome to `entry`'s waiters.
   void Prepare(const std::string& name, const std::shared_ptr<Entry>& entry);
   // Drops idle generator volumes, least recently used first, until those left (`keep`
@@ -141,12 +143,12 @@ class VolumeCatalogue {
   // `keep` cannot fit within the bytes.
   absl::Status MakeRoomLocked(const std::string& keep);
   uint64_t HeldBytesLocked() const;
-  // A generated volume's preparation holds its samples beside the store it builds: it starts
-  // once the stores held and the samples of the preparations running fit max_generator_bytes
-  // with its own, or when no other one runs (so held stores stay within the budget, and
-  // preparations' samples too unless one runs alone); in arrival order. False if the catalogue
-  // stopped or the preparation was abandoned meanwhile. EndPreparationLocked gives the bytes
-  // back.
+  // Every preparation passes this gate, in arrival order. A generated volume's preparation
+  // holds its samples beside the store it builds: it starts once the stores held and the
+  // samples of the preparations running fit max_generator_bytes with its own, or when no other
+  // one runs (so held stores stay within the budget, and preparations' samples too unless one
+  // runs alone); catalogue volumes count no bytes there. False if the catalogue stopped or the
+  // preparation was abandoned meanwhile. EndPreparationLocked gives the bytes back.
   bool StartPreparation(const std::string& name, const std::shared_ptr<Entry>& entry,
                         uint64_t sample_bytes);
   void EndPreparationLocked(uint64_t sample_bytes);
@@ -157,7 +159,7 @@ class VolumeCatalogue {
   std::atomic<int> prepared_{0};
   uint64_t use_clock_ = 0;
   std::atomic<bool> stop_{false};  // set under mu_, so that waiters cannot miss it
-  int generator_preparations_ = 0;     // running, under mu_
+  int preparations_running_ = 0;     // running, under mu_
   std::deque<const Entry*> gate_;      // waiting at StartPreparation, in arrival order, under mu_
   uint64_t preparation_bytes_ = 0;     // their samples (StartPreparation), under mu_
   // Declared last: destroyed (queued preparations run, threads joined) before what they use.
