@@ -226,12 +226,11 @@ TEST(SlowPreparation, SigtermEndsViewsWaitingForItAndExitsPromptly) {
   EXPECT_NE(DaemonLog(dir).find("stopped"), std::string::npos) << DaemonLog(dir);
 }
 
-// Two generated 129^3 volumes asked for at once, each preparation slowed to 1.5 s: their
-// stores take 14.4 MiB each and their samples 12.3 MiB each while they are prepared. Under
-// --generator-mb 40 the stores fit together but the samples of both preparations do not, so
-// the second starts when the first has ended (two 513^3 preparations at once had peaked at
-// 2.40 GB under a 1.78 GB budget); under 60 they run at once. Returns the daemon's log.
-std::string PrepareTwoAtOnce(int generator_mb) {
+// A daemon with --generator-mb `generator_mb` whose every preparation takes 1.5 s, asked for
+// `volumes`, each by a client of its own, `stagger_ms` apart; every frame must arrive. Returns
+// the daemon's log.
+std::string PrepareUnderBudget(int generator_mb, const std::vector<std::string>& volumes,
+                               int stagger_ms) {
   ScratchDir dir;
   DaemonProcess daemon;
   auto c = StartSlowlyPreparingDaemon({"--generator-mb", std::to_string(generator_mb)}, dir,
@@ -240,16 +239,28 @@ std::string PrepareTwoAtOnce(int generator_mb) {
     ADD_FAILURE() << DaemonLog(dir);
     return "";
   }
-  absl::Status got[2];
-  std::thread second([&] {
-    got[1] = c->Fetch(MakeView("sphere:129", 2, 0.01, glm::dvec3(2, 2, 2))).status();
-  });
-  got[0] = c->Fetch(MakeView("cayley:129", 1, 0.01, glm::dvec3(2, 2, 2))).status();
-  second.join();
-  EXPECT_TRUE(got[0].ok()) << got[0];
-  EXPECT_TRUE(got[1].ok()) << got[1];
+  std::vector<absl::Status> got(volumes.size());
+  std::vector<std::thread> clients;
+  for (size_t i = 0; i < volumes.size(); ++i) {
+    if (i > 0) std::this_thread::sleep_for(std::chrono::milliseconds(stagger_ms));
+    clients.emplace_back([&, i] {
+      got[i] = c->Fetch(MakeView(volumes[i], 1, 0.01, glm::dvec3(2, 2, 2))).status();
+    });
+  }
+  for (auto& t : clients) t.join();
+  for (size_t i = 0; i < volumes.size(); ++i)
+    EXPECT_TRUE(got[i].ok()) << volumes[i] << ": " << got[i];
   EXPECT_EQ(daemon.Stop(), 0);
   return DaemonLog(dir);
+}
+
+// Two generated 129^3 volumes asked for at once: their stores take 14.4 MiB each and their
+// samples 12.3 MiB each while they are prepared. Under --generator-mb 40 the stores fit
+// together but the samples of both preparations do not, so the second starts when the first
+// has ended (two 513^3 preparations at once had peaked at 2.40 GB under a 1.78 GB budget);
+// under 60 they run at once.
+std::string PrepareTwoAtOnce(int generator_mb) {
+  return PrepareUnderBudget(generator_mb, {"cayley:129", "sphere:129"}, 0);
 }
 
 // Where `line` first appears in `log` (npos: nowhere), for the two volumes either way round.
@@ -275,25 +286,10 @@ TEST(GeneratorBudget, PreparationsWhoseSamplesDoNotFitTogetherRunOneAfterTheOthe
 // sphere:65 but waits behind it, or a stream of small volumes could keep a large one out for
 // good. Each preparation takes 1.5 s; the requests come 0.3 s apart.
 TEST(GeneratorBudget, PreparationsStartInTheOrderTheyWereAskedFor) {
-  ScratchDir dir;
-  DaemonProcess daemon;
-  auto c = StartSlowlyPreparingDaemon({"--generator-mb", "30"}, dir, &daemon);
-  ASSERT_NE(c, nullptr) << DaemonLog(dir);
-  const std::string volumes[3] = {"sphere:65", "cayley:129", "buckyball:65"};
-  absl::Status got[3];
-  std::vector<std::thread> clients;
-  for (int i = 0; i < 3; ++i) {
-    clients.emplace_back([&, i] {
-      got[i] = c->Fetch(MakeView(volumes[i], 1, 0.01, glm::dvec3(2, 2, 2))).status();
-    });
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  }
-  for (auto& t : clients) t.join();
-  EXPECT_EQ(daemon.Stop(), 0);
-  const std::string log = DaemonLog(dir);
+  const std::vector<std::string> volumes = {"sphere:65", "cayley:129", "buckyball:65"};
+  const std::string log = PrepareUnderBudget(30, volumes, 300);
   size_t start[3];
   for (int i = 0; i < 3; ++i) {
-    EXPECT_TRUE(got[i].ok()) << volumes[i] << ": " << got[i];
     start[i] = At(log, "preparing volume '" + volumes[i] + "'\n");
     ASSERT_NE(start[i], std::string::npos) << log;
   }
