@@ -135,6 +135,10 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
                                          const RetainedCut* same_mesh) const {
   counters_->frames_started.fetch_add(1);
   const auto deadline = deadline_from + std::chrono::milliseconds(settings_.deadline_ms);
+  auto past_deadline = [this] {
+    return absl::DeadlineExceededError("frame took longer than the daemon's deadline of " +
+                                       std::to_string(settings_.deadline_ms) + " ms");
+  };
   const bool raw = view.codec() == pb::RAW;
   const size_t max_chunk = size_t(raw ? std::min(settings_.chunk_triangles, kMaxRawChunkTriangles)
                                       : settings_.chunk_triangles);
@@ -247,8 +251,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
     for (;;) {
       if (cancel->load()) return false;
       if (Clock::now() > deadline) {
-        stop(absl::DeadlineExceededError("frame took longer than the daemon's deadline of " +
-                                         std::to_string(settings_.deadline_ms) + " ms"));
+        stop(past_deadline());
         return false;
       }
       const size_t outstanding = state.chunks.size() - state.released + sink->Queued();
@@ -303,12 +306,15 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   if (recording) retained->EndRecording(volume, whole_mesh ? &result->mesh : nullptr);
   if (retained && whole_mesh) retained->Drew(volume, remembering, result->stats.triangles);
   if (complete) return absl::OkStatus();
+  // The first reason the server stopped the frame, else the extraction's own (a cancelled
+  // extraction is not the server's failure).
   absl::Status failed = error;
-  if (failed.ok() && !result.ok() && result.status().code() == absl::StatusCode::kDeadlineExceeded)
-    failed = absl::DeadlineExceededError("frame took longer than the daemon's deadline of " +
-                                         std::to_string(settings_.deadline_ms) + " ms");
-  else if (failed.ok() && !result.ok() && result.status().code() != absl::StatusCode::kCancelled)
-    failed = result.status();
+  if (failed.ok() && !result.ok()) {
+    if (result.status().code() == absl::StatusCode::kDeadlineExceeded)
+      failed = past_deadline();
+    else if (result.status().code() != absl::StatusCode::kCancelled)
+      failed = result.status();
+  }
   if (!failed.ok()) {
     counters_->frames_failed.fetch_add(1);
     return failed;
