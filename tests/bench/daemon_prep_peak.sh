@@ -9,13 +9,9 @@ cd "$(dirname "$0")/../.."
 build=$1 budget=$2
 shift 2
 log=$(mktemp) out=$(mktemp -d)
-"$build/server/isostreamd" --listen 127.0.0.1:0 --no-cache --generator-mb "$budget" \
-  --max-dim 513 >"$log" 2>&1 &
-daemon=$!
-trap 'kill $daemon 2>/dev/null; wait $daemon 2>/dev/null; rm -rf "$log" "$out"' EXIT
-for _ in $(seq 100); do grep -q "listening on" "$log" && break; sleep 0.1; done
-address=$(grep -o "listening on [^ ]*" "$log" | head -1 | awk '{print $3}')
-[ -n "$address" ] || { cat "$log"; exit 1; }
+scratch=$out
+source tests/bench/daemon_bench_start.sh
+start_daemon --no-cache --generator-mb "$budget" --max-dim 513
 fetches=()
 for v in "$@"; do
   "$build/server/isostream" fetch --server "$address" --volume "$v" --iso 0.3 --eps 0.05 \

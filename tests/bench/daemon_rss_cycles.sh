@@ -7,12 +7,9 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 build=${1:-build} cycles=${2:-24} budget=${3:-150}
 log=$(mktemp) out=$(mktemp --suffix=.ply)
-"$build/server/isostreamd" --listen 127.0.0.1:0 --no-cache --generator-mb "$budget" >"$log" 2>&1 &
-daemon=$!
-trap 'kill $daemon 2>/dev/null; wait $daemon 2>/dev/null; rm -f "$log" "$out"' EXIT
-for _ in $(seq 100); do grep -q "listening on" "$log" && break; sleep 0.1; done
-address=$(grep -o "listening on [^ ]*" "$log" | head -1 | awk '{print $3}')
-[ -n "$address" ] || { cat "$log"; exit 1; }
+scratch=$out
+source tests/bench/daemon_bench_start.sh
+start_daemon --no-cache --generator-mb "$budget"
 volumes=(cayley:257 buckyball:257 noise:257)
 mb() { awk -v k="$1" '$1 == k":" {printf "%.0f", $2 / 1024}' "/proc/$daemon/status"; }
 for i in $(seq "$cycles"); do
