@@ -4,7 +4,8 @@
 // unless told otherwise, prints "listening on HOST:PORT" on stdout once it accepts calls (port
 // 0 picks a free port), and on SIGINT/SIGTERM/SIGHUP turns its health status to NOT_SERVING,
 // refuses new streams, ends views still waiting for a volume's preparation (UNAVAILABLE) and
-// stops that preparation, lets frames in flight finish (bounded wait) and exits 0.
+// stops that preparation, lets frames in flight finish (bounded wait) and exits 0, without
+// waiting more than a second for a preparation that cannot stop mid-step.
 #include <google/protobuf/stubs/logging.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -15,6 +16,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -143,6 +145,18 @@ int Run(const DaemonConfig& config) {
   // Anything still open is cancelled at this deadline.
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(500));
   server->Wait();
+  // Preparations were told to stop at BeginShutdown, and notice it between steps, slabs and
+  // tiles; one inside a step that cannot look (a file being read, OpenVDB decompressing a grid)
+  // would hold the exit for as long as that takes, past a service manager's stop timeout.
+  // Nothing it holds needs an orderly end (the hierarchy cache is written to a temporary file
+  // renamed into place, and a dead writer's temporary file is removed later), so it is left.
+  if (const int unfinished = service.WaitForPreparations(std::chrono::seconds(1))) {
+    spdlog::info("stopped, leaving {} volume preparation(s) in a step that cannot stop",
+                 unfinished);
+    spdlog::shutdown();
+    std::fflush(stdout);
+    std::_Exit(0);
+  }
   spdlog::info("stopped");
   return 0;
 }

@@ -130,6 +130,12 @@ void VolumeCatalogue::Stop() {
   prepared_cv_.notify_all();
 }
 
+int VolumeCatalogue::WaitForPreparations(std::chrono::milliseconds timeout) {
+  std::unique_lock<std::mutex> lock(mu_);
+  prepared_cv_.wait_for(lock, timeout, [&] { return preparations_running_ == 0; });
+  return preparations_running_;
+}
+
 absl::Status VolumeCatalogue::Check(const std::string& name, std::string* canonical) const {
   if (name.empty()) return absl::InvalidArgumentError("no volume named");
   if (options_.volumes.empty())
@@ -230,6 +236,7 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
   const auto delay_end = std::chrono::steady_clock::now() + options_.prepare_delay;
   while (!stop_.load() && std::chrono::steady_clock::now() < delay_end)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  if (started) std::this_thread::sleep_for(options_.prepare_stuck);
   HierarchyBuildOptions build;
   build.threads = options_.build_threads;
   build.stop = &stop_;
@@ -295,8 +302,7 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
   prepared_cv_.notify_all();
 }
 
-bool VolumeCatalogue::StartPreparation(const std::string& name,
-                                       const std::shared_ptr<Entry>& entry,
+bool VolumeCatalogue::StartPreparation(const std::string& name, const std::shared_ptr<Entry>& entry,
                                        uint64_t sample_bytes) {
   std::unique_lock<std::mutex> lock(mu_);
   const uint64_t budget = options_.max_generator_bytes;

@@ -66,6 +66,9 @@ struct CatalogueOptions {
   // that is slow to prepare without big data (isostreamd takes it from the environment
   // variable ISOSTREAMD_TEST_PREPARE_DELAY_MS).
   std::chrono::milliseconds prepare_delay{0};
+  // Test hook: every preparation first sleeps this long without looking at the stop flag, as a
+  // step that cannot be interrupted does (ISOSTREAMD_TEST_PREPARE_STUCK_MS).
+  std::chrono::milliseconds prepare_stuck{0};
   // How long a catalogue entry that failed to prepare answers with that failure before it is
   // tried again (a test hook shortens it: ISOSTREAMD_TEST_RETRY_FAILED_MS).
   std::chrono::milliseconds retry_failed_after{30000};
@@ -97,6 +100,9 @@ class VolumeCatalogue {
   // preparations in progress give up at their next check (between steps, between the
   // hierarchy's tiles), and none start. Prepared volumes are still served.
   void Stop();
+  // After Stop: waits until no preparation runs, at most `timeout`, and returns how many still
+  // do (inside a step that cannot look at the stop flag, such as a file being read).
+  int WaitForPreparations(std::chrono::milliseconds timeout);
 
   std::vector<std::string> Names() const;
   bool generators_allowed() const { return options_.volumes.empty(); }
@@ -110,10 +116,10 @@ class VolumeCatalogue {
   // All fields under the catalogue's mu_.
   struct Entry {
     ServedVolumePtr served;
-    bool preparing = false;  // a preparation job is queued or running: one per volume
-    bool started = false;    // that job got past its queue and the memory gate
-    bool abandoned = false;  // dropped before it started: its job, when it runs, does nothing
-    int waiters = 0;         // Get calls waiting for the preparation
+    bool preparing = false;    // a preparation job is queued or running: one per volume
+    bool started = false;      // that job got past its queue and the memory gate
+    bool abandoned = false;    // dropped before it started: its job, when it runs, does nothing
+    int waiters = 0;           // Get calls waiting for the preparation
     uint64_t store_bytes = 0;  // of a generator volume, known from its spec before preparing
     uint64_t last_use = 0;
     // Why the last preparation failed, for the callers that waited for it. A catalogue entry
@@ -158,10 +164,10 @@ class VolumeCatalogue {
   std::map<std::string, std::shared_ptr<Entry>> entries_;
   std::atomic<int> prepared_{0};
   uint64_t use_clock_ = 0;
-  std::atomic<bool> stop_{false};  // set under mu_, so that waiters cannot miss it
-  int preparations_running_ = 0;     // running, under mu_
-  std::deque<const Entry*> gate_;      // waiting at StartPreparation, in arrival order, under mu_
-  uint64_t preparation_bytes_ = 0;     // their samples (StartPreparation), under mu_
+  std::atomic<bool> stop_{false};   // set under mu_, so that waiters cannot miss it
+  int preparations_running_ = 0;    // running, under mu_
+  std::deque<const Entry*> gate_;   // waiting at StartPreparation, in arrival order, under mu_
+  uint64_t preparation_bytes_ = 0;  // their samples (StartPreparation), under mu_
   // Declared last: destroyed (queued preparations run, threads joined) before what they use.
   WorkerPool preparations_{kPreparationThreads};
 };

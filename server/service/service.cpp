@@ -232,6 +232,10 @@ bool IsostreamService::WaitForStreams(std::chrono::milliseconds timeout) {
   return core_->streams_cv.wait_for(lock, timeout, [&] { return core_->streams.empty(); });
 }
 
+int IsostreamService::WaitForPreparations(std::chrono::milliseconds timeout) {
+  return core_->catalogue.WaitForPreparations(timeout);
+}
+
 pb::ServerStats IsostreamService::Stats() const {
   const ServerCounters& c = core_->counters;
   pb::ServerStats s;

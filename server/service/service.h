@@ -23,8 +23,9 @@ namespace pbv1 = ::isostream::v1;
 // ended a session with OK and no frame, and answers other calls UNIMPLEMENTED, no message.)
 using ServiceBase = pbv1::Isostream::WithRawCallbackMethod_ListVolumes<
     pbv1::Isostream::WithRawCallbackMethod_GetVolumeInfo<
-        pbv1::Isostream::WithRawCallbackMethod_Extract<pbv1::Isostream::WithRawCallbackMethod_Session<
-            pbv1::Isostream::WithRawCallbackMethod_GetServerStats<pbv1::Isostream::Service>>>>>;
+        pbv1::Isostream::WithRawCallbackMethod_Extract<
+            pbv1::Isostream::WithRawCallbackMethod_Session<
+                pbv1::Isostream::WithRawCallbackMethod_GetServerStats<pbv1::Isostream::Service>>>>>;
 }  // namespace internal
 
 class IsostreamService final : public internal::ServiceBase {
@@ -52,6 +53,8 @@ class IsostreamService final : public internal::ServiceBase {
   void BeginShutdown();
   // Waits until no stream is open, at most `timeout`. True if none is open.
   bool WaitForStreams(std::chrono::milliseconds timeout);
+  // Waits until no volume preparation runs, at most `timeout`; returns how many still do.
+  int WaitForPreparations(std::chrono::milliseconds timeout);
 
   ::isostream::v1::ServerStats Stats() const;
 

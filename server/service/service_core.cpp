@@ -22,6 +22,8 @@ ServiceCore::ServiceCore(const DaemonConfig& c)
         o.build_threads = c.threads;
         if (const char* ms = std::getenv("ISOSTREAMD_TEST_PREPARE_DELAY_MS"))
           o.prepare_delay = std::chrono::milliseconds(std::atoll(ms));
+        if (const char* ms = std::getenv("ISOSTREAMD_TEST_PREPARE_STUCK_MS"))
+          o.prepare_stuck = std::chrono::milliseconds(std::atoll(ms));
         if (const char* ms = std::getenv("ISOSTREAMD_TEST_RETRY_FAILED_MS"))
           o.retry_failed_after = std::chrono::milliseconds(std::atoll(ms));
         return o;
