@@ -20,9 +20,9 @@ absl::StatusOr<VolumePtr> LoadFromSpec(std::string_view spec, const VolumeLimits
     case VolumeSource::kVdbFile:
       return LoadVdbFile(parsed.text, parsed.path, parsed.grid_name, limits);
     case VolumeSource::kNiftiFile:
-      return LoadNiftiFile(parsed.text, parsed.path, limits);
+      return LoadNiftiFile(parsed.text, parsed.path, limits, stop);
     case VolumeSource::kRawFile:
-      return LoadRawFile(parsed);
+      return LoadRawFile(parsed, stop);
   }
   return absl::InternalError(parsed.text + ": no loader for this source");
 }

@@ -61,7 +61,7 @@ class HeaderView {
 }  // namespace
 
 absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::string& path,
-                                        const VolumeLimits& limits) {
+                                        const VolumeLimits& limits, const std::atomic<bool>* stop) {
   GzInput input;
   ISOSTREAM_RETURN_IF_ERROR(input.Open(path));
   unsigned char bytes[kHeaderSize];
@@ -160,7 +160,7 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
   ISOSTREAM_RETURN_IF_ERROR(input.Skip(static_cast<size_t>(vox_offset) - kHeaderSize));
 
   std::string grid_name = path.substr(path.find_last_of('/') + 1);
-  return ReadSamples(input, layout, spec, grid_name, spacing, origin);
+  return ReadSamples(input, layout, spec, grid_name, spacing, origin, stop);
 }
 
 }  // namespace isostream

@@ -6,7 +6,7 @@
 
 namespace isostream {
 
-absl::StatusOr<VolumePtr> LoadRawFile(const VolumeSpec& spec) {
+absl::StatusOr<VolumePtr> LoadRawFile(const VolumeSpec& spec, const std::atomic<bool>* stop) {
   SampleLayout layout;
   ParseSampleType(spec.sample_type, &layout.type);  // ParseVolumeSpec took only known types
   layout.big_endian = spec.big_endian;
@@ -29,8 +29,8 @@ absl::StatusOr<VolumePtr> LoadRawFile(const VolumeSpec& spec) {
                                       std::to_string(expected));
   }
   std::string grid_name = path.substr(path.find_last_of('/') + 1);
-  ISOSTREAM_ASSIGN_OR_RETURN(
-      VolumePtr volume, ReadSamples(input, layout, spec.text, grid_name, {1, 1, 1}, {0, 0, 0}));
+  ISOSTREAM_ASSIGN_OR_RETURN(VolumePtr volume, ReadSamples(input, layout, spec.text, grid_name,
+                                                           {1, 1, 1}, {0, 0, 0}, stop));
   // A compressed file's size is known only once read: the same refusal, after the fact.
   unsigned char extra;
   ISOSTREAM_ASSIGN_OR_RETURN(const size_t more, input.Read(&extra, 1));

@@ -34,7 +34,10 @@ absl::Status OutOfMemory(const std::string& where, int n) {
                                       "^3 cube (" + size + ")");
 }
 
-absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where) {
+absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where,
+                                  const std::atomic<bool>* stop) {
+  // Each pass skips its remaining work once told to stop; the status says so after it.
+  const auto stopped = [stop] { return stop != nullptr && stop->load(); };
   const std::array<int, 3>& dims = volume.dims;
   if (volume.grid == nullptr) return absl::InvalidArgumentError(where + ": volume has no grid");
   if (std::min({dims[0], dims[1], dims[2]}) < 2) {
@@ -67,6 +70,7 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
   const openvdb::CoordBBox box(lo, lo.offsetBy(dims[0] - 1, dims[1] - 1, dims[2] - 1));
   ForEachBlock(*volume.grid, box,
                [&](const openvdb::CoordBBox& block, const float* leaf_values, float value) {
+                 if (stopped()) return;
                  for (int z = block.min().z(); z <= block.max().z(); ++z) {
                    for (int y = block.min().y(); y <= block.max().y(); ++y) {
                      float* row = cube + (z - lo.z()) * plane +
@@ -88,11 +92,13 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
                  }
                });
 
+  if (stopped()) return absl::CancelledError(where + ": stopped");
+
   // Replicate edges: first along x and y inside the data planes, then whole planes along z
   // (which need the finished plane dims[2] - 1, hence two passes).
   const int dx = dims[0], dy = dims[1], dz = dims[2];
   tbb::parallel_for(tbb::blocked_range<int>(0, dz), [&](const tbb::blocked_range<int>& r) {
-    for (int z = r.begin(); z != r.end(); ++z) {
+    for (int z = r.begin(); z != r.end() && !stopped(); ++z) {
       float* p = cube + z * plane;
       for (int y = 0; y < dy; ++y) {
         float* row = p + static_cast<size_t>(y) * n;
@@ -103,12 +109,14 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
         std::memcpy(p + static_cast<size_t>(y) * n, last_row, n * sizeof(float));
     }
   });
+  if (stopped()) return absl::CancelledError(where + ": stopped");
   tbb::parallel_for(tbb::blocked_range<int>(dz, n), [&](const tbb::blocked_range<int>& r) {
     const float* last_plane = cube + (dz - 1) * plane;
-    for (int z = r.begin(); z != r.end(); ++z) {
+    for (int z = r.begin(); z != r.end() && !stopped(); ++z) {
       std::memcpy(cube + z * plane, last_plane, plane * sizeof(float));
     }
   });
+  if (stopped()) return absl::CancelledError(where + ": stopped");
   return out;
 }
 
@@ -121,11 +129,12 @@ int HierarchyLevelFor(const std::array<int, 3>& dims) {
   return k;
 }
 
-absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume) {
+absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume,
+                                                   const std::atomic<bool>* stop) {
   const std::string where = "padding '" + volume.name + "'";
   // A module edge like LoadVolume: a throw from OpenVDB or TBB becomes a status here.
   try {
-    return Pad(volume, where);
+    return Pad(volume, where, stop);
   } catch (const std::bad_alloc&) {
     return absl::ResourceExhaustedError(where + ": out of memory");
   } catch (const std::exception& e) {

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 
 #include "server/volume/padded_samples.h"
 #include "server/volume/volume.h"
@@ -21,6 +22,8 @@ namespace isostream {
 // Smallest k >= 1 with 2^k + 1 >= max(dims). Dims must be >= 2.
 int HierarchyLevelFor(const std::array<int, 3>& dims);
 
-absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume);
+// Cancelled between blocks and rows once `stop` (may be null) is set.
+absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume,
+                                                   const std::atomic<bool>* stop = nullptr);
 
 }  // namespace isostream

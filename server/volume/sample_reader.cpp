@@ -244,7 +244,8 @@ int64_t GzInput::UncompressedSize() const {
 absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout, std::string name,
                                       const std::string& grid_name,
                                       const std::array<double, 3>& spacing,
-                                      const std::array<double, 3>& origin) {
+                                      const std::array<double, 3>& origin,
+                                      const std::atomic<bool>* stop) {
   const int bytes_per_sample = SampleBytes(layout.type);
   const int64_t expected =
       int64_t{layout.dims[0]} * layout.dims[1] * layout.dims[2] * bytes_per_sample;
@@ -268,6 +269,8 @@ absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout
   std::vector<float> slab(builder.SlabSamples(0));
   int64_t read_total = 0;
   for (int s = 0; s < builder.slab_count(); ++s) {
+    if (stop != nullptr && stop->load())
+      return absl::CancelledError(input.path() + ": reading stopped");
     const size_t count = builder.SlabSamples(s);
     const size_t want = count * bytes_per_sample;
     ISOSTREAM_ASSIGN_OR_RETURN(const size_t got, input.Read(raw.data(), want));

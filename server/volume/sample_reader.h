@@ -6,6 +6,7 @@
 #include <zlib.h>
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <string>
 #include <string_view>
@@ -74,10 +75,12 @@ struct SampleLayout {
 
 // Reads the samples of LAYOUT from INPUT (positioned at the first sample) into a volume named
 // NAME, slab by slab so only the grid and one slab are in memory. DataLoss when the data ends
-// early, InvalidArgument naming the first NaN/Inf sample. Messages start with INPUT's path.
+// early, InvalidArgument naming the first NaN/Inf sample, Cancelled between slabs once `stop`
+// (may be null) is set. Messages start with INPUT's path.
 absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout, std::string name,
                                       const std::string& grid_name,
                                       const std::array<double, 3>& spacing,
-                                      const std::array<double, 3>& origin);
+                                      const std::array<double, 3>& origin,
+                                      const std::atomic<bool>* stop = nullptr);
 
 }  // namespace isostream

@@ -5,6 +5,7 @@
 #include <openvdb/io/Stream.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -122,6 +123,26 @@ TEST(VolumeLoadRaw, EveryTypeBothByteOrders) {
       EXPECT_EQ((*v)->spacing, (std::array<double, 3>{1, 1, 1}));
       ExpectSamples(**v, [&](int64_t i) { return static_cast<float>(StoredValue(t.type, i)); });
     }
+  }
+}
+
+// A daemon shutting down stops a preparation in the middle of reading a big file: raw and
+// NIfTI samples are read slab by slab, each after a look at the stop flag (PrepareVolume passes
+// the daemon's).
+TEST(VolumeLoadFiles, StopFlagCancelsRawAndNiftiReads) {
+  NiftiFile nf;
+  nf.dims = {6, 5, 9};
+  nf.datatype = 16;  // float32
+  nf.bitpix = 32;
+  const std::string nii = ScratchPath("stopped.nii"), raw = ScratchPath("stopped.raw");
+  WriteBytes(nii, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  WriteBytes(raw, Samples(Type::kFloat32, nf.dims, false));
+  for (const std::string& spec : {nii, "raw:" + raw + ":6x5x9:float32"}) {
+    std::atomic<bool> stop{true};
+    ExpectError(LoadVolume(spec, VolumeLimits{}, &stop), absl::StatusCode::kCancelled,
+                spec == nii ? nii : raw, "stopped");
+    stop = false;
+    EXPECT_TRUE(LoadVolume(spec, VolumeLimits{}, &stop).ok()) << spec;
   }
 }
 
