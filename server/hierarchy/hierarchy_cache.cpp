@@ -79,20 +79,26 @@ bool OpenCache(const std::string& path, const PaddedSamples& s, uint64_t samples
 // The hierarchy from a cache entry's payload, read straight into its store (AssembleHierarchy)
 // and checked against `eta_hash` as it goes. Null with `why` set if the payload is short or
 // fails its checksum (the caller rebuilds); an error only for what a rebuild would meet too
-// (out of memory).
+// (out of memory), or CANCELLED once `stop` (may be null) is set, between slabs.
 absl::StatusOr<HierarchyPtr> ReadCache(std::ifstream* in, const PaddedSamples& s, uint64_t eta_hash,
-                                       std::string* why) {
+                                       const std::atomic<bool>* stop, std::string* why) {
   std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> hash(XXH3_createState(),
                                                                 &XXH3_freeState);
   if (!hash) return absl::ResourceExhaustedError("hierarchy cache: out of memory");
   XXH3_64bits_reset(hash.get());
   const size_t plane = static_cast<size_t>(s.n) * s.n;
+  bool stopped = false;
   auto h = AssembleHierarchy(s, [&](int z_begin, int z_end, uint16_t* codes) {
+    if (stop != nullptr && stop->load()) {
+      stopped = true;
+      return false;
+    }
     const size_t bytes = size_t(z_end - z_begin) * plane * sizeof(uint16_t);
     if (!in->read(reinterpret_cast<char*>(codes), std::streamsize(bytes))) return false;
     XXH3_64bits_update(hash.get(), codes, bytes);
     return true;
   });
+  if (stopped) return absl::CancelledError("preparation stopped");
   if (!h.ok() && h.status().code() == absl::StatusCode::kDataLoss) {
     *why = "cache payload truncated";
     return HierarchyPtr();
@@ -241,7 +247,7 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   std::ifstream in;
   uint64_t eta_hash = 0;
   if (OpenCache(path, samples, hash, &in, &eta_hash, &reason)) {
-    ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr read, ReadCache(&in, samples, eta_hash, &reason));
+    ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr read, ReadCache(&in, samples, eta_hash, build.stop, &reason));
     if (read) {
       std::error_code ec;  // a hit is a use: the eviction order is by this time
       std::filesystem::last_write_time(path, std::filesystem::file_time_type::clock::now(), ec);

@@ -32,6 +32,7 @@ std::string DefaultCacheDir();
 
 // Returns the cached hierarchy for these samples, or builds (and stores) it. A cache that
 // cannot be written is not an error: the built hierarchy is returned and `why` says so.
+// CANCELLED once build.stop is set: the cache is read, as the hierarchy is built, in slabs.
 absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
                                                   const HierarchyCacheOptions& cache,
                                                   const HierarchyBuildOptions& build,

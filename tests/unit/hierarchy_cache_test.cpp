@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -161,6 +162,21 @@ TEST_F(HierarchyCacheTest, CorruptTruncatedAndForeignFilesAreRebuilt) {
     Get(Samples(4, 0), &outcome);
     EXPECT_EQ(outcome, CacheOutcome::kHit) << "replaced file is good again, variant " << variant;
   }
+}
+
+// A daemon shutting down stops a preparation that reads a cache entry (1025^3: 2.1 GB), as one
+// that builds: CANCELLED, and the entry stays for the next start.
+TEST_F(HierarchyCacheTest, StopFlagCancelsAHit) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);
+  ASSERT_EQ(outcome, CacheOutcome::kMissBuilt);
+  std::atomic<bool> stop{true};
+  HierarchyBuildOptions build;
+  build.stop = &stop;
+  auto h = LoadOrBuildHierarchy(Samples(4, 0), cache_, build, &outcome);
+  EXPECT_EQ(h.status().code(), absl::StatusCode::kCancelled) << h.status();
+  Get(Samples(4, 0), &outcome);
+  EXPECT_EQ(outcome, CacheOutcome::kHit);
 }
 
 TEST_F(HierarchyCacheTest, UnwritableDirectoryStillBuilds) {
