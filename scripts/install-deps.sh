@@ -19,7 +19,7 @@ PACKAGES=(
   libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libpng-dev libxxhash-dev libabsl-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
-  # the systemd unit's check (tests/deploy): systemd-analyze, and strace for the daemon's system calls
+  # the systemd unit's check (tests/deploy): systemd-analyze, strace for the daemon's system calls
   systemd strace
 )
 

@@ -13,10 +13,14 @@
 set -euo pipefail
 unit=$(realpath "$1") daemon=$(realpath "$2") cli=$(realpath "$3")
 for tool in systemd-analyze strace; do
-  command -v "$tool" >/dev/null || { echo "check_unit: $tool is missing (scripts/install-deps.sh)"; exit 1; }
+  if ! command -v "$tool" >/dev/null; then
+    echo "check_unit: $tool is missing (scripts/install-deps.sh)"
+    exit 1
+  fi
 done
 if ! strace -f -qq -o /dev/null true 2>/dev/null; then
-  echo "check_unit: SKIPPED: this machine does not permit ptrace (strace), so the daemon's system calls cannot be checked"
+  echo "check_unit: SKIPPED: this machine does not permit ptrace (strace)," \
+    "so the daemon's system calls cannot be checked"
   exit 77
 fi
 work=$(mktemp -d)
@@ -33,7 +37,8 @@ trap cleanup EXIT
 # 1-2. The unit as installed, but starting the built binary (verify wants it to exist).
 sed "s|^ExecStart=/usr/local/bin/isostreamd|ExecStart=$daemon|" "$unit" >"$work/isostreamd.service"
 systemd-analyze verify "$work/isostreamd.service"
-if ! systemd-analyze security --offline=true --threshold=20 "$work/isostreamd.service" >"$work/security"; then
+if ! systemd-analyze security --offline=true --threshold=20 "$work/isostreamd.service" \
+  >"$work/security"; then
   grep -E "✗|Overall" "$work/security"
   echo "check_unit: exposure above 2.0"
   exit 1
@@ -61,8 +66,11 @@ sort -u -o "$work/allow" "$work/allow"
 sort -u -o "$work/deny" "$work/deny"
 
 # A 33^3 uint8 raw volume: distance from the centre.
-LC_ALL=C awk 'BEGIN { n = 33; for (z = 0; z < n; z++) for (y = 0; y < n; y++) for (x = 0; x < n; x++) {
-  v = int(255 * sqrt((x - 16) ^ 2 + (y - 16) ^ 2 + (z - 16) ^ 2) / 28); printf "%c", (v > 255 ? 255 : v) } }' \
+LC_ALL=C awk 'BEGIN { n = 33
+  for (z = 0; z < n; z++) for (y = 0; y < n; y++) for (x = 0; x < n; x++) {
+    v = int(255 * sqrt((x - 16) ^ 2 + (y - 16) ^ 2 + (z - 16) ^ 2) / 28)
+    printf "%c", (v > 255 ? 255 : v)
+  } }' \
   >"$work/vol.raw"
 cat >"$work/config.json" <<JSON
 {"listen": "127.0.0.1:0", "cache_dir": "$work/cache", "preload": true, "shutdown_grace_ms": 2000,
@@ -124,7 +132,10 @@ fi
 families=$(grep -oE "socket\(AF_[A-Z0-9]+" "$work/trace" | sed 's/socket(//' | sort -u)
 allowed_families=$(sed -n 's/^RestrictAddressFamilies=//p' "$unit")
 for f in $families; do
-  case " $allowed_families " in *" $f "*) ;; *) echo "check_unit: socket family $f is not allowed"; failed=1 ;; esac
+  case " $allowed_families " in
+    *" $f "*) ;;
+    *) echo "check_unit: socket family $f is not allowed"; failed=1 ;;
+  esac
 done
 if grep -E "^[0-9]+ +(mmap|mprotect|pkey_mprotect)\(.*PROT_WRITE\|PROT_EXEC" "$work/trace"; then
   echo "check_unit: writable executable memory (MemoryDenyWriteExecute)"
@@ -135,4 +146,5 @@ if grep -E "^[0-9]+ +(mprotect|pkey_mprotect)\(.*PROT_EXEC" "$work/trace"; then
   failed=1
 fi
 [ "$failed" = 0 ] || exit 1
-echo "check_unit: $(wc -l <"$work/used") distinct system calls, all allowed; socket families:" $families
+echo "check_unit: $(wc -l <"$work/used") distinct system calls, all allowed;" \
+  "socket families:" $families
