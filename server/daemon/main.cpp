@@ -153,7 +153,9 @@ int Run(const DaemonConfig& config) {
   if (const int unfinished = service.WaitForPreparations(std::chrono::seconds(1))) {
     spdlog::info("stopped, leaving {} volume preparation(s) in a step that cannot stop",
                  unfinished);
-    spdlog::shutdown();
+    // Not spdlog::shutdown(): the thread left behind may log when its step returns, through
+    // the default logger that shutdown would release.
+    spdlog::default_logger()->flush();
     std::fflush(stdout);
     std::_Exit(0);
   }

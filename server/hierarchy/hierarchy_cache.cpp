@@ -1,10 +1,12 @@
 #include "server/hierarchy/hierarchy_cache.h"
 
+#include <fcntl.h>
 #include <signal.h>
 #include <unistd.h>
 #include <xxhash.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -12,10 +14,40 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <mutex>
+#include <new>
+#include <set>
 #include <vector>
 
 namespace isostream {
 namespace {
+
+// The names of the temporary files this process is writing now. One named with this process's
+// id but not among them was left by an earlier process that had the same id (a container's
+// daemon is always PID 1), killed mid-write or left by a quick exit.
+class TemporariesInProgress {
+ public:
+  static TemporariesInProgress& Get() {
+    static TemporariesInProgress instance;
+    return instance;
+  }
+  void Add(const std::string& name) {
+    std::lock_guard<std::mutex> lock(mu_);
+    names_.insert(name);
+  }
+  void Remove(const std::string& name) {
+    std::lock_guard<std::mutex> lock(mu_);
+    names_.erase(name);
+  }
+  bool Contains(const std::string& name) const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return names_.count(name) != 0;
+  }
+
+ private:
+  mutable std::mutex mu_;
+  std::set<std::string> names_;
+};
 
 constexpr char kMagic[8] = {'I', 'S', 'O', 'H', 'I', 'E', 'R', '\0'};
 
@@ -114,34 +146,58 @@ bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples
                 std::string* why) {
   std::error_code ec;
   std::filesystem::create_directories(std::filesystem::path(path).parent_path(), ec);
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    Header h{};
-    std::memcpy(h.magic, kMagic, sizeof(kMagic));
-    h.version = kHierarchyCacheVersion;
-    h.k = static_cast<uint32_t>(hier.k());
-    h.n = static_cast<uint32_t>(hier.n());
-    for (int a = 0; a < 3; ++a) h.data_dims[a] = hier.data_dims()[a];
-    h.samples_hash = samples_hash;
-    const UninitializedVector<uint16_t> eta = hier.LinearEtaCodes();
-    h.eta_count = eta.size();
-    h.eta_hash = XXH3_64bits(eta.data(), eta.size() * sizeof(uint16_t));
-    out.write(reinterpret_cast<const char*>(&h), sizeof(h));
-    out.write(reinterpret_cast<const char*>(eta.data()),
-              static_cast<std::streamsize>(eta.size() * sizeof(uint16_t)));
-    if (!out.flush()) {
-      *why = "cannot write cache file " + tmp + ": " + std::strerror(errno);
-      std::filesystem::remove(tmp, ec);
-      return false;
-    }
-  }
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    *why = "cannot move cache file into place: " + ec.message();
+  // A name no other writer uses, in this process (two catalogue names for the same samples
+  // prepared at once) or another: writers sharing one file would truncate each other's.
+  static std::atomic<unsigned> serial{0};
+  const std::string tmp =
+      path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(serial.fetch_add(1));
+  const std::string tmp_name = std::filesystem::path(tmp).filename().string();
+  TemporariesInProgress::Get().Add(tmp_name);
+  const auto fail = [&](const std::string& what) {
+    *why = what;
     std::filesystem::remove(tmp, ec);
+    TemporariesInProgress::Get().Remove(tmp_name);
+    return false;
+  };
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd < 0) {
+    const std::string reason = std::strerror(errno);
+    TemporariesInProgress::Get().Remove(tmp_name);
+    *why = "cannot create cache file " + tmp + ": " + reason;
     return false;
   }
+  std::FILE* out = ::fdopen(fd, "wb");
+  if (out == nullptr) {
+    ::close(fd);
+    return fail("cannot write cache file " + tmp + ": " + std::strerror(errno));
+  }
+  Header h{};
+  std::memcpy(h.magic, kMagic, sizeof(kMagic));
+  h.version = kHierarchyCacheVersion;
+  h.k = static_cast<uint32_t>(hier.k());
+  h.n = static_cast<uint32_t>(hier.n());
+  for (int a = 0; a < 3; ++a) h.data_dims[a] = hier.data_dims()[a];
+  h.samples_hash = samples_hash;
+  // The codes in linear order are a copy as large as a quarter of the store (2.1 GB at
+  // 1025^3): without room for it the hierarchy is served, only not stored.
+  UninitializedVector<uint16_t> eta;
+  try {
+    eta = hier.LinearEtaCodes();
+  } catch (const std::bad_alloc&) {
+    std::fclose(out);
+    return fail("out of memory for the cache file's copy of the eta codes");
+  }
+  h.eta_count = eta.size();
+  h.eta_hash = XXH3_64bits(eta.data(), eta.size() * sizeof(uint16_t));
+  const bool written = std::fwrite(&h, sizeof(h), 1, out) == 1 &&
+                       std::fwrite(eta.data(), sizeof(uint16_t), eta.size(), out) == eta.size();
+  const int write_errno = errno;
+  if (std::fclose(out) != 0 || !written)
+    return fail("cannot write cache file " + tmp + ": " +
+                std::strerror(written ? errno : write_errno));
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) return fail("cannot move cache file into place: " + ec.message());
+  TemporariesInProgress::Get().Remove(tmp_name);
   return true;
 }
 
@@ -169,12 +225,15 @@ void EvictBeyond(const std::string& dir, uint64_t max_bytes, const std::string& 
       if (f.path() != std::filesystem::path(keep)) entries.push_back({used, bytes, f.path()});
       continue;
     }
-    // "NAME.eta.tmp.PID": a write in progress counts; one whose writer died (killed mid-write)
-    // would stay forever, and goes.
+    // "NAME.eta.tmp.PID.SERIAL": a write in progress counts; one whose writer is gone (killed
+    // mid-write, or the daemon's quick exit) would stay forever, and goes.
     const size_t tmp = name.rfind(".eta.tmp.");
     if (tmp == std::string::npos) continue;
     const long pid = std::strtol(name.c_str() + tmp + 9, nullptr, 10);
-    if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) {
+    const bool writer_gone =
+        pid > 0 && ((::kill(pid_t(pid), 0) != 0 && errno == ESRCH) ||
+                    (pid == ::getpid() && !TemporariesInProgress::Get().Contains(name)));
+    if (writer_gone) {
       std::filesystem::remove(f.path(), e1);
     } else {
       total += bytes;
@@ -257,7 +316,11 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
     }
   }
   in.close();
-  result = std::filesystem::exists(path) ? CacheOutcome::kInvalidRebuilt : CacheOutcome::kMissBuilt;
+  // Not the throwing exists(): a directory this process may not search (EACCES) or a path too
+  // long would throw out of the preparation.
+  std::error_code ec;
+  result = std::filesystem::exists(path, ec) ? CacheOutcome::kInvalidRebuilt
+                                             : CacheOutcome::kMissBuilt;
   ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built, BuildHierarchy(std::move(samples), build));
   std::string write_why;
   // The outcome says what was read; the note says whether the new entry was stored.

@@ -1,6 +1,8 @@
 #include "server/hierarchy/prepared_volume.h"
 
 #include <chrono>
+#include <exception>
+#include <new>
 
 #include "server/volume/load.h"
 #include "server/volume/padding.h"
@@ -18,11 +20,9 @@ absl::Status StopRequested(const HierarchyBuildOptions& build) {
   return absl::OkStatus();
 }
 
-}  // namespace
-
-absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const VolumeLimits& limits,
-                                             const HierarchyCacheOptions& cache,
-                                             const HierarchyBuildOptions& build) {
+absl::StatusOr<PreparedVolume> PrepareSteps(const std::string& spec, const VolumeLimits& limits,
+                                            const HierarchyCacheOptions& cache,
+                                            const HierarchyBuildOptions& build) {
   PreparedVolume p;
   auto t0 = std::chrono::steady_clock::now();
   ISOSTREAM_ASSIGN_OR_RETURN(p.volume, LoadVolume(spec, limits, build.stop));
@@ -49,6 +49,22 @@ absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const Volu
     p.grid_to_world.spacing[a] = p.volume->spacing[a];
   }
   return p;
+}
+
+}  // namespace
+
+absl::StatusOr<PreparedVolume> PrepareVolume(const std::string& spec, const VolumeLimits& limits,
+                                             const HierarchyCacheOptions& cache,
+                                             const HierarchyBuildOptions& build) {
+  // The module edge: a throw from any step (the standard library's file system calls, an
+  // allocation) is the caller's error status, not the end of a daemon serving other volumes.
+  try {
+    return PrepareSteps(spec, limits, cache, build);
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError(spec + ": out of memory while preparing");
+  } catch (const std::exception& e) {
+    return absl::InternalError(spec + ": " + e.what());
+  }
 }
 
 }  // namespace isostream

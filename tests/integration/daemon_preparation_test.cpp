@@ -39,6 +39,28 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
+// A cache directory whose entries cannot be looked up (here a name longer than the file system
+// allows; EACCES for one the daemon may not search, such as a HOME it cannot enter) is no cache:
+// frames are served and the log says why nothing is stored. The look-up threw on a preparation
+// thread and the daemon aborted at its first frame (std::terminate).
+TEST(NoPreloadDaemon, ServesWhenItsCacheDirectoryCannotBeSearched) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--cache-dir", dir.path() + "/" + std::string(300, 'd')},
+                           dir.path() + "/isostreamd.log"));
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  for (int i = 0; i < 2; ++i) {  // the second frame: the daemon is still there
+    auto frame = (*c)->Fetch(MakeView("sphere:17", 1 + i, 0.01, glm::dvec3(2, 2, 2)));
+    ASSERT_TRUE(frame.ok()) << frame.status() << "\n" << DaemonLog(dir);
+    EXPECT_GT(frame->mesh.triangle_count(), 0u);
+  }
+  EXPECT_NE(DaemonLog(dir).find("not stored"), std::string::npos) << DaemonLog(dir);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 // A daemon whose every preparation first sleeps `delay_ms` (the test hook `hook`: by default
 // one that Stop cuts short), with a 0.5 s frame deadline and `flags`, and a client of it
 // (nullptr if either failed).

@@ -102,18 +102,21 @@ TEST_F(HierarchyCacheTest, CapEvictsTheLeastRecentlyUsed) {
   EXPECT_FALSE(fs::exists(a));
   EXPECT_TRUE(fs::exists(b));
   EXPECT_FALSE(fs::exists(c));
-  // Trimming applies the cap without a store; a half-written entry whose writer died goes,
-  // one whose writer lives (this process) stays.
-  const fs::path dead = dir_ / (fs::path(b).filename().string() + ".tmp.999999999");
-  const fs::path live =
-      dir_ / (fs::path(b).filename().string() + ".tmp." + std::to_string(::getpid()));
-  std::ofstream(dead) << "half";
-  std::ofstream(live) << "half";
+  // Trimming applies the cap without a store; a half-written entry whose writer died goes, one
+  // whose writer lives (process 1, which always does) stays, and one named with this process's
+  // id that it is not writing goes: an earlier process with the same id left it (a container's
+  // daemon is always PID 1, and its quick exit leaves a preparation's write unfinished).
+  const std::string entry = fs::path(b).filename().string();
+  const fs::path dead = dir_ / (entry + ".tmp.999999999.0");
+  const fs::path live = dir_ / (entry + ".tmp.1.0");
+  const fs::path earlier_self = dir_ / (entry + ".tmp." + std::to_string(::getpid()) + ".7");
+  for (const fs::path& p : {dead, live, earlier_self}) std::ofstream(p) << "half";
   cache_.max_bytes = 1;
   TrimHierarchyCache(cache_);
   EXPECT_FALSE(fs::exists(b));
   EXPECT_FALSE(fs::exists(dead));
   EXPECT_TRUE(fs::exists(live));
+  EXPECT_FALSE(fs::exists(earlier_self));
 }
 
 TEST_F(HierarchyCacheTest, ChangedSamplesAreNotServedFromCache) {
@@ -177,6 +180,21 @@ TEST_F(HierarchyCacheTest, StopFlagCancelsAHit) {
   EXPECT_EQ(h.status().code(), absl::StatusCode::kCancelled) << h.status();
   Get(Samples(4, 0), &outcome);
   EXPECT_EQ(outcome, CacheOutcome::kHit);
+}
+
+// A cache directory whose entries' names cannot even be looked up (a component longer than the
+// file system allows: ENAMETOOLONG; EACCES for one the daemon may not search) is no cache: the
+// hierarchy is built and served, the reason noted. The look-up used to throw out of the
+// preparation and end the daemon (std::terminate on a pool thread).
+TEST_F(HierarchyCacheTest, UnsearchableDirectoryStillBuilds) {
+  fs::create_directories(dir_);  // so that the look-up reaches the long name
+  cache_.dir = (dir_ / std::string(300, 'd')).string();
+  CacheOutcome outcome;
+  std::string why;
+  auto h = LoadOrBuildHierarchy(Samples(3, 0), cache_, {}, &outcome, &why);
+  ASSERT_TRUE(h.ok()) << h.status();
+  EXPECT_EQ(outcome, CacheOutcome::kMissBuilt);
+  EXPECT_NE(why.find("not stored"), std::string::npos) << why;
 }
 
 TEST_F(HierarchyCacheTest, UnwritableDirectoryStillBuilds) {
