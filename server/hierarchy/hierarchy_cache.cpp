@@ -306,7 +306,8 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   std::ifstream in;
   uint64_t eta_hash = 0;
   if (OpenCache(path, samples, hash, &in, &eta_hash, &reason)) {
-    ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr read, ReadCache(&in, samples, eta_hash, build.stop, &reason));
+    ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr read,
+                               ReadCache(&in, samples, eta_hash, build.stop, &reason));
     if (read) {
       std::error_code ec;  // a hit is a use: the eviction order is by this time
       std::filesystem::last_write_time(path, std::filesystem::file_time_type::clock::now(), ec);
@@ -319,8 +320,8 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
   // Not the throwing exists(): a directory this process may not search (EACCES) or a path too
   // long would throw out of the preparation.
   std::error_code ec;
-  result = std::filesystem::exists(path, ec) ? CacheOutcome::kInvalidRebuilt
-                                             : CacheOutcome::kMissBuilt;
+  result =
+      std::filesystem::exists(path, ec) ? CacheOutcome::kInvalidRebuilt : CacheOutcome::kMissBuilt;
   ISOSTREAM_ASSIGN_OR_RETURN(HierarchyPtr built, BuildHierarchy(std::move(samples), build));
   std::string write_why;
   // The outcome says what was read; the note says whether the new entry was stored.
