@@ -183,7 +183,7 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
     entry->preparing = true;
     entry->started = false;
     entry->failed = absl::OkStatus();
-    preparations_.Submit([this, name, entry] { Prepare(name, entry); });
+    EnqueueLocked(name, entry);
   }
   ++entry->waiters;
   absl::StatusOr<ServedVolumePtr> outcome = ShuttingDown();
@@ -208,10 +208,36 @@ absl::StatusOr<ServedVolumePtr> VolumeCatalogue::Get(const std::string& requeste
   return outcome;
 }
 
+void VolumeCatalogue::EnqueueLocked(const std::string& name, const std::shared_ptr<Entry>& entry) {
+  line_.emplace_back(name, entry);
+  if (line_runners_ == kPreparationThreads) return;
+  ++line_runners_;
+  preparations_.Submit([this] { RunLine(); });
+}
+
+void VolumeCatalogue::RunLine() {
+  for (;;) {
+    std::pair<std::string, std::shared_ptr<Entry>> next;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (line_.empty()) {
+        --line_runners_;
+        return;
+      }
+      next = std::move(line_.front());
+      line_.pop_front();
+    }
+    Prepare(next.first, next.second);
+  }
+}
+
 void VolumeCatalogue::AbandonLocked(const std::string& name, const std::shared_ptr<Entry>& entry) {
   spdlog::info("preparing volume '{}' dropped before it started: nobody waits for it", name);
   entry->abandoned = true;
   entry->preparing = false;
+  const auto in_line = std::find_if(line_.begin(), line_.end(),
+                                    [&](const auto& item) { return item.second == entry; });
+  if (in_line != line_.end()) line_.erase(in_line);
   EraseIfCurrentLocked(name, entry);
   prepared_cv_.notify_all();  // a job at the memory gate gives up
 }
@@ -381,6 +407,11 @@ absl::Status VolumeCatalogue::MakeRoomLocked(const std::string& keep) {
   return absl::ResourceExhaustedError("volume " + Quoted(keep) + " needs " + MiB(needed) +
                                       ", and generated volumes being prepared hold " + others +
                                       " this daemon keeps for them: try again when they are ready");
+}
+
+size_t VolumeCatalogue::queued_preparations() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return line_.size() + preparations_.queued();
 }
 
 int VolumeCatalogue::held_count() const {

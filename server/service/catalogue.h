@@ -18,6 +18,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "server/extract/budget_memo.h"
@@ -111,6 +112,8 @@ class VolumeCatalogue {
   int prepared_count() const { return prepared_.load(); }
   // Volumes held now.
   int held_count() const;
+  // Preparations in line for a preparation thread, and jobs waiting for one.
+  size_t queued_preparations() const;
 
  private:
   // All fields under the catalogue's mu_.
@@ -118,7 +121,7 @@ class VolumeCatalogue {
     ServedVolumePtr served;
     bool preparing = false;    // a preparation job is queued or running: one per volume
     bool started = false;      // that job got past its queue and the memory gate
-    bool abandoned = false;    // dropped before it started: its job, when it runs, does nothing
+    bool abandoned = false;    // dropped before it started (out of line, or off the gate)
     int waiters = 0;           // Get calls waiting for the preparation
     uint64_t store_bytes = 0;  // of a generator volume, known from its spec before preparing
     uint64_t last_use = 0;
@@ -138,8 +141,12 @@ class VolumeCatalogue {
   // threads.
   static constexpr int kPreparationThreads = 4;
   // The last waiter of a preparation not started yet gave up: the entry goes (a later request
-  // starts afresh) and its job will find nothing to do.
+  // starts afresh), out of the line if it is still there.
   void AbandonLocked(const std::string& name, const std::shared_ptr<Entry>& entry);
+  // Puts a preparation in line, and a job on the pool to run the line unless enough are on it.
+  void EnqueueLocked(const std::string& name, const std::shared_ptr<Entry>& entry);
+  // A pool job: prepares what is in line, in order, until the line is empty.
+  void RunLine();
   // Removes `entry` from the map unless a later request has put another under its name.
   void EraseIfCurrentLocked(const std::string& name, const std::shared_ptr<Entry>& entry);
   // Runs on a preparation thread: prepares `name` and hands the outcome to `entry`'s waiters.
@@ -168,6 +175,12 @@ class VolumeCatalogue {
   int preparations_running_ = 0;    // running, under mu_
   std::deque<const Entry*> gate_;   // waiting at StartPreparation, in arrival order, under mu_
   uint64_t preparation_bytes_ = 0;  // their samples (StartPreparation), under mu_
+  // Preparations not taken by a pool job yet, in arrival order, and how many jobs run the line
+  // (at most kPreparationThreads), under mu_. The line, not the pool's queue, holds them, so an
+  // abandoned one leaves at once: a client sending view after view for volumes that wait
+  // behind long preparations queued a job (and its entry) for each, for as long as those ran.
+  std::deque<std::pair<std::string, std::shared_ptr<Entry>>> line_;
+  int line_runners_ = 0;
   // Declared last: destroyed (queued preparations run, threads joined) before what they use.
   WorkerPool preparations_{kPreparationThreads};
 };

@@ -23,6 +23,11 @@ void WorkerPool::Submit(std::function<void()> job) {
   cv_.notify_one();
 }
 
+size_t WorkerPool::queued() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return jobs_.size();
+}
+
 void WorkerPool::Loop() {
   for (;;) {
     std::function<void()> job;

@@ -20,10 +20,12 @@ class WorkerPool {
 
   // Jobs must not throw; they may submit further jobs.
   void Submit(std::function<void()> job);
+  // Jobs waiting for a thread.
+  size_t queued() const;
 
  private:
   void Loop();
-  std::mutex mu_;
+  mutable std::mutex mu_;
   std::condition_variable cv_;
   std::deque<std::function<void()>> jobs_;
   bool stopping_ = false;

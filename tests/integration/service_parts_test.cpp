@@ -289,6 +289,27 @@ TEST(Catalogue, RefusesAGeneratorVolumeThatOthersBeingPreparedLeaveNoRoomFor) {
   EXPECT_EQ(catalogue.held_count(), 2);
 }
 
+// Views given up while their volumes wait behind long preparations leave nothing queued: each
+// had left a pool job (and its entry) until a preparation thread was free, so a client sending
+// view after view grew the daemon for as long as those preparations ran.
+TEST(Catalogue, PreparationsGivenUpInLineLeaveNothingQueued) {
+  CatalogueOptions o;
+  o.prepare_delay = std::chrono::milliseconds(1500);
+  VolumeCatalogue catalogue(o);
+  std::vector<std::thread> running;
+  for (const char* name : {"sphere:17", "cayley:17", "buckyball:17", "shells:17"})
+    running.emplace_back([&catalogue, name] { EXPECT_TRUE(catalogue.Get(name).ok()); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // on all four threads
+  for (int i = 0; i < 200; ++i) {
+    auto given_up = catalogue.Get("noise:17:" + std::to_string(i + 2), [] { return true; });
+    EXPECT_EQ(given_up.status().code(), absl::StatusCode::kCancelled) << given_up.status();
+  }
+  EXPECT_EQ(catalogue.queued_preparations(), 0u);
+  for (std::thread& t : running) t.join();
+  EXPECT_EQ(catalogue.prepared_count(), 4);
+  EXPECT_TRUE(catalogue.Get("noise:17:2").ok());  // asked again, it is prepared afresh
+}
+
 TEST(Quantization, AtMostOneSixtyFourthVoxel) {
   for (int n : {9, 65, 129, 513, 2049}) {
     Volume v;
