@@ -244,20 +244,42 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
     });
   };
 
+  // Whether the frame has room for another chunk now: kNo while the client has not taken
+  // enough of the queued ones, kStop once the frame must stop. Called with state.mu held.
+  enum class Room { kYes, kNo, kStop };
+  auto room_locked = [&] {
+    if (cancel->load()) return Room::kStop;
+    if (Clock::now() > deadline) {
+      stop(past_deadline());
+      return Room::kStop;
+    }
+    const size_t outstanding = state.chunks.size() - state.released + sink->Queued();
+    return outstanding < size_t(settings_.max_queued_chunks) ? Room::kYes : Room::kNo;
+  };
   // Waits until the frame has room for another chunk (or must stop). Polls the sink's queue
   // on a short period: the sink drains on gRPC's threads, which do not notify this frame.
   auto wait_for_room = [&] {
     std::unique_lock<std::mutex> lock(state.mu);
     for (;;) {
-      if (cancel->load()) return false;
-      if (Clock::now() > deadline) {
-        stop(past_deadline());
-        return false;
-      }
-      const size_t outstanding = state.chunks.size() - state.released + sink->Queued();
-      if (outstanding < size_t(settings_.max_queued_chunks)) return true;
+      const Room room = room_locked();
+      if (room != Room::kNo) return room == Room::kYes;
       state.cv.wait_for(lock, std::chrono::milliseconds(1));
     }
+  };
+  // Cuts the full chunks of the first `end` triangles not cut yet, while there is room now
+  // (`wait`: waiting for it). False if the frame must stop.
+  auto cut_full_chunks = [&](const OrderedMesh& mesh, size_t end, bool wait) {
+    while (end - cut_end >= chunk_size(state.chunks.size())) {
+      if (wait) {
+        if (!wait_for_room()) return false;
+      } else {
+        std::lock_guard<std::mutex> lock(state.mu);
+        const Room room = room_locked();
+        if (room != Room::kYes) return room == Room::kNo;
+      }
+      cut(mesh, chunk_size(state.chunks.size()), false, nullptr);
+    }
+    return true;
   };
 
   ExtractObserver observer;
@@ -272,10 +294,12 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
           " triangles (this daemon's limit): raise eps or give a triangle budget"));
       return;
     }
-    while (end - cut_end >= chunk_size(state.chunks.size())) {
-      if (!wait_for_room()) return;
-      cut(mesh, chunk_size(state.chunks.size()), false, nullptr);
-    }
+    // Never waits for the client here: on_ready runs under the extractor's lock, which every
+    // worker of the extraction takes after each subtree, and TBB's workers are shared by all
+    // extractions, so one client that stopped reading held the workers of every other frame
+    // (each ran on its own thread alone) until its deadline. What has no room yet is cut
+    // once the extraction has returned, on this frame's own thread.
+    cut_full_chunks(mesh, end, false);
   };
 
   ExtractRequest remembering = request;  // budget -> eps is the same for every view
@@ -288,7 +312,8 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   if (result.ok() && same_mesh) counters_->frames_reordered.fetch_add(1);
   bool last_cut = false;
   if (result.ok()) *stats_out = result->stats;
-  if (result.ok() && !cancel->load() && wait_for_room()) {
+  if (result.ok() && !cancel->load() &&
+      cut_full_chunks(result->mesh, result->mesh.triangle_count(), true) && wait_for_room()) {
     cut(result->mesh, result->mesh.triangle_count() - cut_end, true, &result->stats);
     last_cut = true;
   }

@@ -2,10 +2,12 @@
 // frame producer against a sink that never drains (bounded memory, deadline), and how the
 // client explains failed calls.
 #include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
 
 #include <chrono>
 #include <fstream>
 #include <mutex>
+#include <set>
 #include <thread>
 
 #include "client/net/session_client.h"
@@ -370,6 +372,54 @@ TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
   EXPECT_EQ(s.code(), absl::StatusCode::kDeadlineExceeded) << s;
   EXPECT_LE(sink.chunks_.size(), 4u);  // never more than max_queued_chunks held
   for (size_t i = 0; i < sink.chunks_.size(); ++i) EXPECT_EQ(sink.chunks_[i].chunk_index(), i);
+}
+
+// A client that stops reading holds only its own frame's thread, not the extraction's TBB
+// workers, which every extraction in the daemon shares: its chunks wait for room after the
+// extraction has returned. They used to wait inside the extractor's on_ready, under the lock
+// every worker of that extraction takes after each subtree, so the workers stayed there until
+// the deadline and other frames ran on their own threads alone.
+TEST(FrameProducer, AStuckClientLeavesTheSharedWorkersFree) {
+  if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "TBB has no worker thread";
+  CatalogueOptions o;
+  VolumeCatalogue catalogue(o);
+  auto volume = catalogue.Get("buckyball:65");
+  ASSERT_TRUE(volume.ok()) << volume.status();
+  WorkerPool encoders(1);
+  ServerCounters counters;
+  FrameSettings settings;
+  settings.chunk_triangles = 1024;
+  settings.first_chunk_triangles = 1024;
+  settings.max_queued_chunks = 2;
+  settings.deadline_ms = 2500;
+  FrameProducer producer(settings, &encoders, &counters);
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  for (float iso : {0.05f, 0.15f, 0.25f}) view.add_surfaces()->set_isovalue(iso);
+  view.set_eps(0.0);
+  view.mutable_camera()->mutable_eye()->set_x(3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok()) << request.status();
+  std::atomic<bool> cancel{false};
+  StuckSink sink;
+  absl::Status stuck;
+  std::thread frame([&] {
+    const auto now = std::chrono::steady_clock::now();
+    stuck = producer.Run(**volume, view, *request, 1, &cancel, &sink, now, now);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // its queue is full by now
+  // Work another frame would give the workers: slow items, so that a free worker joins.
+  std::mutex mu;
+  std::set<std::thread::id> threads;
+  tbb::parallel_for(0, 64, [&](int) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    std::lock_guard<std::mutex> lock(mu);
+    threads.insert(std::this_thread::get_id());
+  });
+  frame.join();
+  EXPECT_EQ(stuck.code(), absl::StatusCode::kDeadlineExceeded) << stuck;
+  EXPECT_LE(sink.chunks_.size(), 2u);
+  EXPECT_GE(threads.size(), 2u) << "the other work ran on its own thread only";
 }
 
 TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
