@@ -34,8 +34,10 @@ namespace isostream::service {
 template <class Reactor>
 class ChunkStream : public Reactor, public StreamBase {
  public:
-  ChunkStream(ServiceCore* core, grpc::CallbackServerContext* context)
-      : core_(core), context_(context), peer_(context->peer()) {}
+  // `retains`: the stream keeps its last refined frame's cut to re-order it for the next view
+  // of the same mesh (Session streams; an Extract call has no next view).
+  ChunkStream(ServiceCore* core, grpc::CallbackServerContext* context, bool retains)
+      : core_(core), context_(context), peer_(context->peer()), retains_(retains) {}
 
   // Creates a stream owned by itself (until OnDone) and registered for shutdown.
   template <class Derived, class... Args>
@@ -334,6 +336,9 @@ class ChunkStream : public Reactor, public StreamBase {
     // of that wait.) The preparation is bounded by the loader's limits instead, and a client that
     // gave up meanwhile stopped waiting for it (checked above).
     const Clock::time_point deadline_from = Clock::now();
+    if (!retains_)
+      return core_->producer.Run(**volume, view, request, generation, cancel, this, received,
+                                 deadline_from, &coarse_hint_, nullptr);
     // The retained frame is this stream's for the view (other streams may free it between
     // views, when their own frames need the memory).
     std::lock_guard<std::mutex> using_retained(retained_.mutex());
@@ -345,6 +350,7 @@ class ChunkStream : public Reactor, public StreamBase {
   grpc::CallbackServerContext* context_;  // valid until OnDone; jobs may outlive it
   const std::string peer_;
   std::shared_ptr<StreamBase> self_;
+  const bool retains_;
   bool admitted_ = false;  // holds a session slot (set before any other thread sees the stream)
   bool idle_timeout_applies_ = false;              // Session streams, once admitted; under mu_
   CoarseHint coarse_hint_;                         // used by the one running job only
