@@ -30,7 +30,8 @@ struct ExtractResult {
 struct ExtractObserver {
   // Called as the mesh grows, in draw order: triangles [first, end) of `mesh`, and every
   // vertex they use, are final. Calls come one at a time (under the extractor's lock, on one
-  // of its threads) with increasing ranges; copy what you need and return quickly.
+  // of its threads) with increasing ranges; copy what you need and return quickly: never wait
+  // here (for a client, say), as every worker of the extraction waits for this lock in turn.
   std::function<void(const OrderedMesh& mesh, size_t first, size_t end)> on_ready;
   // Checked between subtrees (of the budget search's counting passes too): once true, the
   // extraction stops and returns CANCELLED; once past `deadline`, DEADLINE_EXCEEDED.
