@@ -134,6 +134,24 @@ TEST_F(Daemon, BudgetSearchRunsOnceAndLaterViewsReuseItsEps) {
   }
 }
 
+// An Extract call draws one view: it keeps nothing to re-order (recording its cut cost
+// instructions and retain_mb memory, and could free Session streams' retained frames). While
+// its frame arrives, the daemon holds no retained frame for it.
+TEST_F(Daemon, AnExtractCallRetainsNothing) {
+  auto c = Connect();
+  auto before = c->GetServerStats();
+  ASSERT_TRUE(before.ok());
+  int64_t during = -1;
+  auto frame = c->Fetch(MakeView("buckyball:65", 70, 0.003, glm::dvec3(2, 2, 2)),
+                        [&](const pb::FrameChunk& chunk) {
+                          if (chunk.chunk_index() != 0) return;
+                          auto now = Connect()->GetServerStats();
+                          if (now.ok()) during = now->retained_bytes();
+                        });
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  EXPECT_EQ(during, before->retained_bytes());
+}
+
 // Within a session, a refined frame is kept and later views of its mesh (same volume,
 // isovalues, eps, normals) are re-ordered from it, not extracted again: the frame says so, and
 // equals a direct extraction for its view. A progressive request then skips its coarse frame;
