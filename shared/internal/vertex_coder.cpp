@@ -257,6 +257,12 @@ absl::Status DecodeChunkVertices(const char* data, size_t size, uint32_t vertex_
     const uint32_t modulus = uint32_t{1} << position_bits;
     const uint32_t max_symbol = MaxSymbol(modulus);
     const float step = box.range / static_cast<float>(modulus - 1);  // as Draco's Dequantizer
+    // Both ends of the box being finite is not enough: the top symbol's float(q) * step +
+    // origin may round past FLT_MAX. Coordinates grow with q, so the top one bounds them all.
+    for (int k = 0; k < 3; ++k) {
+      if (!std::isfinite(static_cast<float>(modulus - 1) * step + box.origin[k]))
+        return absl::DataLossError("vertex part: quantization box is not finite");
+    }
     uint32_t q[3] = {0, 0, 0};
     for (uint32_t v = 0; v < vertex_count; ++v) {
       for (int k = 0; k < 3; ++k) {

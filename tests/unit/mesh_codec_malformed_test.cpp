@@ -78,6 +78,27 @@ TEST_F(MalformedChunks, RawChunkWithANonFinitePositionIsRejected) {
   EXPECT_TRUE(TryDecode(chunks_[1]).ok());
 }
 
+// A quantization box whose ends are finite but whose top step rounds past FLT_MAX (found by a
+// reviewing helper): the chunk encodes, and its decoding is DATA_LOSS, not infinite positions.
+TEST(QuantizedPositions, ABoxWhoseTopRoundsToInfinityIsRejected) {
+  const float origin = 0x1.46c102p+120f, range = 0x1.fd727cp+127f;
+  ASSERT_TRUE(std::isfinite(origin + range));
+  OrderedMesh m;
+  m.positions = {origin, origin, origin, origin + range, origin, origin, origin, origin + range,
+                 origin};
+  m.triangles = {0, 1, 2};
+  m.surface = {0};
+  CodecOptions o;
+  o.position_bits = 6;
+  o.position_box = QuantizationBox{{origin, origin, origin}, range};
+  std::string chunk;
+  ASSERT_TRUE(EncodeChunk(m, 0, 1, o, &chunk).ok());
+  OrderedMesh out;
+  const absl::Status s = DecodeAnyChunk(chunk.data(), chunk.size(), &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss) << s;
+  EXPECT_NE(s.message().find("not finite"), std::string::npos) << s;
+}
+
 // Normals too, in raw chunks and in lossless Draco ones (codec 3 checked both already).
 TEST_F(MalformedChunks, NonFiniteNormalsAndDracoValuesAreRejected) {
   std::string raw = chunks_[1];
