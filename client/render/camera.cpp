@@ -39,6 +39,11 @@ glm::mat4 Camera::ProjectionMatrix() const {
   return glm::perspective(glm::radians(fov_y_degrees), aspect, near_plane, far_plane);
 }
 
+void EncloseSphere(float distance, float radius, Camera* camera) {
+  camera->near_plane = std::max(distance - 1.1f * radius, 1e-3f * distance);
+  camera->far_plane = distance + 1.1f * radius;
+}
+
 bool IsValidCamera(const Camera& c) {
   if (!Finite(c.eye) || !Finite(c.target) || !Finite(c.up)) return false;
   const glm::vec3 d = c.target - c.eye;
@@ -73,8 +78,7 @@ Camera FrameSphere(const glm::vec3& center, float sphere_radius, const glm::vec3
     distance = margin * radius / std::sin(std::min(half_v, half_h));
   }
   c.eye = c.target + distance * dir;
-  c.near_plane = std::max(distance - 1.1f * radius, 1e-3f * distance);
-  c.far_plane = distance + 1.1f * radius;
+  EncloseSphere(distance, radius, &c);
   return c;
 }
 

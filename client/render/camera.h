@@ -34,6 +34,11 @@ struct Camera {
   glm::mat4 ViewProjection() const { return ProjectionMatrix() * ViewMatrix(); }
 };
 
+// Near and far planes enclosing the sphere of `radius` about a point `distance` from the eye,
+// with a margin (near stays at least 1e-3 of the distance: an eye inside the sphere still
+// gets a depth range single precision can resolve).
+void EncloseSphere(float distance, float radius, Camera* camera);
+
 // True when the camera's fields describe a projection: finite values, eye != target, up not
 // parallel to the viewing direction, 0 < near < far, aspect > 0, and a field of view in (0, 180)
 // or a positive orthographic half height.

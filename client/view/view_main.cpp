@@ -140,7 +140,8 @@ absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_
   return absl::UnavailableError("the server closed the stream before the frame was complete");
 }
 
-render::Camera FitToMesh(render::Camera camera, const OrderedMesh& mesh) {
+render::Camera FitToMesh(const render::Camera& unfitted, const OrderedMesh& mesh) {
+  render::Camera camera = unfitted;
   if (mesh.vertex_count() == 0) return camera;
   glm::vec3 lo(mesh.positions[0], mesh.positions[1], mesh.positions[2]), hi = lo;
   for (size_t i = 0; i < mesh.vertex_count(); ++i) {
@@ -149,8 +150,11 @@ render::Camera FitToMesh(render::Camera camera, const OrderedMesh& mesh) {
     hi = glm::max(hi, p);
   }
   const glm::vec3 center = 0.5f * (lo + hi);
-  const float radius = std::max(0.5f * glm::length(hi - lo), 1e-6f);
   const float distance = glm::length(camera.eye - center);
+  // At least a ten-thousandth of the distance: a frame whose vertices all fall on one point
+  // (a single bright voxel's surface, 26 vertices in one place) left near and far equal in
+  // single precision, and the frame could not be drawn.
+  const float radius = std::max(0.5f * glm::length(hi - lo), 1e-4f * distance);
   if (distance <= radius * 1.05f) return camera;  // eye inside: keep the volume framing
   if (camera.projection == render::Projection::kPerspective) {
     camera.target = center;
@@ -161,9 +165,8 @@ render::Camera FitToMesh(render::Camera camera, const OrderedMesh& mesh) {
       camera.fov_y_degrees = std::min(170.0f, glm::degrees(2 * half));
     }
   }
-  camera.near_plane = std::max(1e-3f * distance, distance - 1.1f * radius);
-  camera.far_plane = distance + 1.1f * radius;
-  return camera;
+  render::EncloseSphere(distance, radius, &camera);
+  return render::IsValidCamera(camera) ? camera : unfitted;
 }
 
 // Exits 2 for a request that cannot be made as given (as usage errors do), 1 for anything that
@@ -275,8 +278,7 @@ int Run(const Args& args) {
     camera.fov_y_degrees = distance > radius
                                ? std::min(170.0f, 2.1f * glm::degrees(std::asin(radius / distance)))
                                : 90.0f;
-    camera.near_plane = std::max(1e-3f * distance, distance - 1.1f * radius);
-    camera.far_plane = distance + 1.1f * radius;
+    render::EncloseSphere(distance, radius, &camera);
     // Refused before any frame is fetched: an eye so far that single precision cannot tell
     // near from far (1e30, say) has no projection to draw with.
     if (!render::IsValidCamera(camera))
@@ -311,6 +313,7 @@ int Run(const Args& args) {
     window.state = state;
     window.camera = camera;
     window.value_range = value_range;
+    window.scene_radius = 0.5f * glm::length(hi - lo);
     window.exit_after_frames = args.exit_after_frames;
     window.screenshot = args.output;
     renderer->reset();  // the window makes its own context and renderer
@@ -396,7 +399,8 @@ int main(int argc, char** argv) {
                "[ ] isovalues, R reset, Q quit");
   auto* exit_after =
       app.add_option("--exit-after", args.exit_after_frames,
-                     "with --window: close after N refined frames, writing -o as a screenshot");
+                     "with --window: close after N refined frames, writing -o as a screenshot")
+          ->check(CLI::Range(1, 1 << 30));
   app.add_option("--timeout-s", args.timeout_s,
                  "headless: fail after this many seconds without an answer or data from the "
                  "server, connecting included (default 60; 0: wait forever)")
@@ -410,6 +414,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "isostream-view: --exit-after closes a --window; headless runs end "
                  "after their frames anyway\n");
+    return 2;
+  }
+  if (args.window && !args.output.empty() && !*exit_after) {
+    std::fprintf(stderr,
+                 "isostream-view: -o with --window is the screenshot taken when the window "
+                 "closes itself: give --exit-after N too\n");
     return 2;
   }
   // Given values are checked here (NaN and -1 also mean "not given" inside Run).

@@ -51,8 +51,9 @@ struct Input {
   bool dragging = false;
   double last_x = 0, last_y = 0;
   bool changed = true;
-  int eps_steps = 0;  // +1: eps / 2
-  int iso_steps = 0;  // +1: isovalues + 1% of the range
+  float min_distance = 0, max_distance = 0;  // of the zoom, from the volume's size
+  int eps_steps = 0;                         // +1: eps / 2
+  int iso_steps = 0;                         // +1: isovalues + 1% of the range
   bool reset = false;
 };
 
@@ -90,9 +91,7 @@ class Connection {
     return absl::OkStatus();
   }
 
-  absl::Status Send(const ::isostream::v1::ViewRequest& request) {
-    return session_->Send(request);
-  }
+  absl::Status Send(const ::isostream::v1::ViewRequest& request) { return session_->Send(request); }
 
   // The stream ended from the server's side: its final status.
   absl::Status Finished() {
@@ -162,6 +161,8 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
 
   Input input;
   input.orbit = Orbit::From(options.camera);
+  input.min_distance = 1e-3f * options.scene_radius;
+  input.max_distance = std::max(1e3f * options.scene_radius, input.orbit.distance);
   glfwSetWindowUserPointer(window, &input);
   glfwSetMouseButtonCallback(window, [](GLFWwindow* w, int button, int action, int) {
     auto* in = static_cast<Input*>(glfwGetWindowUserPointer(w));
@@ -179,7 +180,8 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
   });
   glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
     auto* in = static_cast<Input*>(glfwGetWindowUserPointer(w));
-    in->orbit.distance *= std::pow(0.9f, float(dy));
+    in->orbit.distance = std::clamp(in->orbit.distance * std::pow(0.9f, float(dy)),
+                                    in->min_distance, in->max_distance);
     in->changed = true;
   });
   glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
@@ -220,6 +222,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
   uint64_t request_id = 0;
   net::FrameAssembler assembler(client.options().max_frame_triangles);
   bool frame_open = false;
+  bool awaiting_frame = false;  // a view was sent and its refined frame is not complete
   int refined_frames = 0;
   absl::Status result;
   render::Camera camera = options.camera;
@@ -238,9 +241,14 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       input.iso_steps = 0;
       camera.eye = input.orbit.Eye();
       camera.target = input.orbit.target;
+      // The planes the initial camera had belong to its distance: zoomed in, near cut the
+      // volume's front away, and past it the whole picture.
+      render::EncloseSphere(input.orbit.distance, options.scene_radius, &camera);
       if (!connection.open()) result = connection.Open();
-      if (result.ok()) result = connection.Send(MakeViewRequest(state, camera, palette, ++request_id));
+      if (result.ok())
+        result = connection.Send(MakeViewRequest(state, camera, palette, ++request_id));
       if (!result.ok()) break;
+      awaiting_frame = true;
       input.changed = false;
     }
     Inbox& inbox = connection.inbox();
@@ -256,7 +264,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
         if (assembler.complete()) {
           result = (*renderer)->EndFrame();
           frame_open = false;
-          if (!f.coarse) ++refined_frames;
+          if (!f.coarse) ++refined_frames, awaiting_frame = false;
           std::snprintf(title, sizeof(title), "isostream-view  %s  eps %s  %lld triangles  %s",
                         state.volume.c_str(), ShortestText(f.stats.eps_used()).c_str(),
                         (long long)f.mesh.triangle_count(), f.coarse ? "(coarse)" : "");
@@ -267,8 +275,10 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
     if (!result.ok()) break;
     if (connection.open() && inbox.ended && inbox.chunks.empty()) {
       result = connection.Finished();
-      if (absl::IsDeadlineExceeded(result)) {
-        result = absl::OkStatus();  // idle: reopen on the next move
+      // The daemon ends an idle session (no view, no frame in flight) with DEADLINE_EXCEEDED,
+      // and a frame past its deadline too: only the first is reopened on the next move.
+      if (absl::IsDeadlineExceeded(result) && !awaiting_frame) {
+        result = absl::OkStatus();
       } else {
         if (result.ok()) result = absl::UnavailableError("the server closed the session");
         break;

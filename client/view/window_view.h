@@ -18,6 +18,7 @@ struct WindowOptions {
   ViewState state;
   render::Camera camera;   // initial eye and target; orbiting keeps the target
   double value_range = 1;  // max - min of the volume, for the isovalue keys
+  float scene_radius = 1;  // of the volume's bounding sphere: near and far follow the zoom
   // For tests and scripts: close after this many refined frames have been shown, writing a
   // screenshot of the last one to `screenshot` (if not empty). 0: run until closed.
   int exit_after_frames = 0;

@@ -99,11 +99,37 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
            {"--eps nan", "--eps"},
            {"--budget -5", "--budget"},
            {"--size 4294967297x1", "--size"},
-           {"--token \"$(printf 'a\\tb')\"", "token"}}) {
-    const ViewRun r = View("--server 127.0.0.1:1 --volume buckyball:65 -o " + png + " " + args);
+           {"--token \"$(printf 'a\\tb')\"", "token"},
+           // A window that would never close itself, or whose -o would never be written.
+           {"--window --exit-after 0", "--exit-after"},
+           {"--window --exit-after -1", "--exit-after"},
+           {"--window", "--exit-after"}}) {
+    const ViewRun r =
+        View("--server 127.0.0.1:1 --volume buckyball:65 -o " + png + " " + args, true);
     EXPECT_EQ(r.code, 2) << args;
     EXPECT_NE(r.output.find(says), std::string::npos) << args << "\n" << r.output;
   }
+}
+
+// A frame whose vertices all decode to one point (the surface around a single bright voxel)
+// is drawn: its fitted camera had near and far equal in single precision, and the viewer
+// stopped with "camera has no valid projection" (exit 2) and no picture.
+TEST(View, DrawsAFrameWhoseVerticesShareOnePoint) {
+  testing::ScratchDir dir;
+  const std::string raw = dir.path() + "/voxel.raw";
+  {
+    std::string bytes(65 * 65 * 65, '\0');
+    bytes[(16 * 65 + 16) * 65 + 16] = char(255);
+    std::ofstream(raw, std::ios::binary) << bytes;
+  }
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache", "--volume", "voxel=raw:" + raw + ":65x65x65:uint8"},
+                           dir.path() + "/daemon.log"));
+  const std::string png = dir.path() + "/voxel.png";
+  const ViewRun r = View("--server " + daemon.address() +
+                         " --volume voxel --iso 254 --eps 0 --size 64x64 -o " + png);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(render::ReadPng(png).ok());
 }
 
 // The daemon's counters (empty, with a test failure, if it cannot be asked).
@@ -171,6 +197,52 @@ TEST(View, WindowModeShowsTheFrameUnderXvfb) {
   ASSERT_TRUE(image.ok()) << image.status();
   EXPECT_EQ(image->width, 240);
   EXPECT_GT(Coverage(*image), 0.05);
+}
+
+// A frame past the daemon's deadline ends the window with that error: it was taken for the
+// daemon closing an idle session, and the window waited for a move that would reopen it (with
+// --exit-after, until killed, without a screenshot).
+TEST(View, WindowReportsAFramePastTheDaemonsDeadline) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "xvfb-run is not installed (scripts/install-deps.sh installs it)";
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache", "--deadline-ms", "1"}, dir.path() + "/daemon.log"));
+  const std::string cmd = "timeout 30 xvfb-run -a -s '-screen 0 640x480x24' " +
+                          std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
+                          " --volume cayley:129 --iso 0 --eps 0 --size 120x100 --window"
+                          " --exit-after 1 -o " +
+                          dir.path() + "/never.png";
+  const testing::CommandResult run = testing::RunCommand(cmd);
+  EXPECT_NE(run.code, 0);
+  EXPECT_NE(run.code, 124) << "still waiting when timeout killed it";
+  EXPECT_NE(run.output.find("deadline"), std::string::npos) << run.output;
+}
+
+// Zooming keeps the volume drawn: near and far follow the eye. They kept the initial
+// distance's: zoomed in, the near plane cut the front of the volume away; eight notches out,
+// the far plane cut everything (a blank window).
+TEST(View, WindowZoomedOutStillShowsTheSurfaces) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1 && command -v xdotool > /dev/null 2>&1") !=
+      0)
+    GTEST_SKIP() << "xvfb-run or xdotool is not installed (scripts/install-deps.sh installs them)";
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
+  const std::string png = dir.path() + "/zoomed.png";
+  const std::string view = std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
+                           " --volume cayley:65 --iso 0 --eps 0.01 --size 240x200 --window"
+                           " --exit-after 2 -o " +
+                           png;
+  const std::string cmd = "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' sh -c '" + view +
+                          " & pid=$!; sleep 3; xdotool search --sync --name isostream-view"
+                          " windowfocus --sync mousemove --window %1 120 100"
+                          " click --repeat 8 --delay 0 5; wait $pid'";  // one burst: one view
+  const testing::CommandResult run = testing::RunCommand(cmd);
+  ASSERT_EQ(run.code, 0) << run.output;
+  auto image = render::ReadPng(png);
+  ASSERT_TRUE(image.ok()) << image.status();
+  EXPECT_GT(Coverage(*image), 0.01);  // nothing was drawn
 }
 
 // The daemon closes a session that sent no view for --idle-timeout-s; the window keeps its
