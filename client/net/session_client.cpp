@@ -35,7 +35,7 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
       // that does not resolve, a TLS mismatch) is a daemon never reached.
       if (m.find("failed to connect") == std::string::npos) {
         for (const char* broke : {"Socket closed", "Connection reset", "Broken pipe", "GOAWAY",
-                                  "shutting down", "stream is broken"})
+                                  "shutting down", "stream is broken", "closed the stream"})
           if (m.find(broke) != std::string::npos)
             return "lost the connection to isostreamd at " + options.address + " (" + m + ")";
       }
@@ -62,17 +62,31 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
 }
 
 absl::Status FrameAssembler::Add(const pb::FrameChunk& chunk) {
-  if (!started_ || complete_ || chunk.frame_id() != frame_.id || chunk.coarse() != frame_.coarse) {
-    if (chunk.chunk_index() != 0)
-      return absl::DataLossError("frame " + std::to_string(chunk.frame_id()) + " starts at chunk " +
-                                 std::to_string(chunk.chunk_index()));
-    frame_ = Frame();
-    frame_.id = chunk.frame_id();
-    frame_.coarse = chunk.coarse();
-    started_ = true;
-    complete_ = false;
-    next_chunk_ = 0;
+  if (started_ && !complete_ && chunk.frame_id() == frame_.id && chunk.coarse() == frame_.coarse)
+    return AddToFrame(chunk);
+  if (chunk.chunk_index() != 0)
+    return absl::DataLossError("frame " + std::to_string(chunk.frame_id()) + " starts at chunk " +
+                               std::to_string(chunk.chunk_index()));
+  // A new frame, kept only if its first chunk is: a refused one leaves the frame before it
+  // (a complete one, say) as it was.
+  Frame before = std::move(frame_);
+  const bool was_started = started_, was_complete = complete_;
+  const uint32_t was_next = next_chunk_;
+  frame_ = Frame();
+  frame_.id = chunk.frame_id();
+  frame_.coarse = chunk.coarse();
+  started_ = true;
+  complete_ = false;
+  next_chunk_ = 0;
+  const absl::Status added = AddToFrame(chunk);
+  if (!added.ok()) {
+    frame_ = std::move(before);
+    started_ = was_started, complete_ = was_complete, next_chunk_ = was_next;
   }
+  return added;
+}
+
+absl::Status FrameAssembler::AddToFrame(const pb::FrameChunk& chunk) {
   if (chunk.chunk_index() != next_chunk_)
     return absl::DataLossError("chunk " + std::to_string(chunk.chunk_index()) + " arrived, " +
                                std::to_string(next_chunk_) + " expected");

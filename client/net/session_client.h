@@ -77,6 +77,8 @@ class FrameAssembler {
   Frame Take();
 
  private:
+  // Add for a chunk of the frame in progress.
+  absl::Status AddToFrame(const pb::FrameChunk& chunk);
   int64_t max_triangles_;
   Frame frame_;
   bool started_ = false;

@@ -513,6 +513,15 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
     for (const auto& c : sink.chunks_) EXPECT_TRUE(plain.Add(c).ok());
     return plain.frame().mesh.vertex_count();
   }());
+  // The first chunk of a new frame too: refused, it leaves the complete frame before it (it
+  // used to replace it by an empty frame in progress).
+  auto next_frame = sink.chunks_[0];
+  next_frame.set_frame_id(next_frame.frame_id() + 1);
+  next_frame.set_first_triangle(5);
+  EXPECT_EQ(careful.Add(next_frame).code(), absl::StatusCode::kDataLoss);
+  EXPECT_TRUE(careful.complete());
+  EXPECT_EQ(careful.frame().mesh.triangle_count(), next);
+  EXPECT_EQ(careful.frame().id, sink.chunks_[0].frame_id());
 
   // A chunk declaring more triangles than a stream's chunks hold is refused before decoding
   // (a 64 KB chunk could expand to a million triangles).
