@@ -17,6 +17,8 @@
 #include <cstring>
 #include <map>
 #include <string>
+#include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "absl/strings/strip.h"
@@ -153,7 +155,15 @@ class VdbStructure {
   // Only float trees are walked, so no other tree may ever be read: OpenVDB reads every grid of
   // a file without offsets, an instance's parent whatever its type, and the first grid of a
   // name (the loader asks for the chosen grid by the name in its metadata).
+  // One pass with hash lookups: comparing every grid with every other took minutes for a
+  // file of 80,000 empty grids (41 MB).
   bool Reachable(int64_t at) {
+    // Grids an instance may name as its parent (not instances themselves), by unique name and
+    // type; and the first grid of each name, with its index.
+    std::unordered_set<std::string> parents;
+    for (const GridEntry& p : grids_)
+      if (p.parent.empty()) parents.insert(p.unique_name + '\0' + p.type);
+    std::unordered_map<std::string, size_t> first_of_name;
     for (size_t i = 0; i < grids_.size(); ++i) {
       const GridEntry& g = grids_[i];
       const std::string where = "grid " + std::to_string(i);
@@ -162,18 +172,16 @@ class VdbStructure {
       if (g.has_name_meta && g.name_meta != g.name)
         return Fail(at, where + " is named '" + g.name + "' in its descriptor and '" + g.name_meta +
                             "' in its metadata");
-      if (!g.parent.empty()) {
-        bool found = false;
-        for (const GridEntry& p : grids_)
-          found |= p.unique_name == g.parent && p.parent.empty() && p.type == g.type;
-        if (!found) return Fail(at, where + " is an instance of no grid of its type");
-      }
-      for (size_t j = 0; j < i; ++j)
-        if (grids_[j].name == g.name && grids_[j].is_float != g.is_float)
-          return Unsupported(at, "grids " + std::to_string(j) + " and " + std::to_string(i) +
-                                     " are both named '" + g.name +
-                                     "', one float and one not (OpenVDB finds the first by "
-                                     "name): rename one");
+      if (!g.parent.empty() && !parents.count(g.parent + '\0' + g.type))
+        return Fail(at, where + " is an instance of no grid of its type");
+      // Every earlier grid of this name is as float as the first (else refused already).
+      const auto [first, added] = first_of_name.emplace(g.name, i);
+      const size_t j = first->second;
+      if (!added && grids_[j].is_float != g.is_float)
+        return Unsupported(at, "grids " + std::to_string(j) + " and " + std::to_string(i) +
+                                   " are both named '" + g.name +
+                                   "', one float and one not (OpenVDB finds the first by "
+                                   "name): rename one");
     }
     return true;
   }
