@@ -425,17 +425,30 @@ class VdbStructure {
   bool Tree(uint32_t tiles, uint32_t children, const std::string& where) {
     budget_.StartTree();
     std::map<std::array<int32_t, 3>, int> table;  // origin -> child (-1: a tile)
+    // OpenVDB keeps a root entry under the origin it reads; lookups go to the multiple of 4096
+    // below a voxel, so an entry elsewhere (one flipped bit) is never found, and every sample
+    // under it would read as the background.
+    auto misplaced = [&](const std::array<int32_t, 3>& origin, int64_t at, const char* what) {
+      if (((origin[0] | origin[1] | origin[2]) & 4095) == 0) return false;
+      Fail(at, where + " " + what + " origin (" + std::to_string(origin[0]) + ", " +
+                   std::to_string(origin[1]) + ", " + std::to_string(origin[2]) +
+                   ") is not a multiple of 4096");
+      return true;
+    };
     for (uint32_t t = 0; t < tiles; ++t) {
       std::array<int32_t, 3> origin;
+      const int64_t at = in_.pos();
       if (!Get(&origin, "root tile") || !in_.Skip(5)) return Fail(in_.pos(), where + " root tile");
+      if (misplaced(origin, at, "root tile")) return false;
       table[origin] = -1;
     }
     std::vector<std::vector<Mask>> leaves(children);  // per root child, its leaves' masks
     for (uint32_t c = 0; c < children; ++c) {
       std::array<int32_t, 3> origin;
-      if (!Get(&origin, "root child origin") || !CountNode(0, in_.pos(), where) ||
-          !Internal(5, &leaves[c], where))
-        return false;
+      const int64_t at = in_.pos();
+      if (!Get(&origin, "root child origin")) return false;
+      if (misplaced(origin, at, "root child")) return false;
+      if (!CountNode(0, in_.pos(), where) || !Internal(5, &leaves[c], where)) return false;
       table[origin] = int(c);
     }
     if (has_offsets_ && in_.pos() != in_.end())

@@ -109,6 +109,8 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
   uint32_t leaf_mask = 0;
   std::memcpy(&leaf_mask, good.data() + block_pos, 4);
   const size_t grid_count = length_of("density") - 4;
+  uint32_t first_child_x = 0;  // the root's first child's origin follows its two counts
+  std::memcpy(&first_child_x, good.data() + root_tiles + 8, 4);
   const Case cases[] = {
       {"uuid.vdb", 24, 0x7a7a7a7au, "file UUID is malformed", 0},
       {"offset_flag.vdb", 20, 2, "grid offset flag is 2", 0},
@@ -128,6 +130,9 @@ TEST(VolumeLoadErrors, DamagedVdbFraming) {
       {"transform.vdb", map, 0x7f000000u, "transform type claims", 0},
       {"root_tiles.vdb", root_tiles, 0x10000000u, "root claims 268435456 tiles", 0},
       {"root_children.vdb", root_tiles + 4, 3, "and 3 children", root_tiles},
+      // One bit off a multiple of 4096: OpenVDB would never find the child, and its samples
+      // read as the background (the file loaded, its range quietly smaller).
+      {"root_origin.vdb", root_tiles + 8, first_child_x + 1, "is not a multiple of 4096", 0},
       {"grid_count.vdb", grid_count, 0x10000000u, "grid count 268435456 does not fit the file", 0},
   };
   for (const Case& c : cases) {
