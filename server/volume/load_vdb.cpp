@@ -199,7 +199,13 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
     return absl::InvalidArgumentError(where +
                                       ": non-linear (frustum) transforms are not supported");
   }
-  const openvdb::Mat4d m = transform.baseMap()->getAffineMap()->getMat4();
+  // A scale map whose scales nearly cancel makes OpenVDB throw here: the file's error, named.
+  openvdb::Mat4d m;
+  try {
+    m = transform.baseMap()->getAffineMap()->getMat4();
+  } catch (const std::exception& e) {
+    return absl::InvalidArgumentError(where + ": degenerate transform (" + e.what() + ")");
+  }
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) {
       if ((r == c) != (m(r, c) != 0) || (r == c && !(m(r, c) > 0))) {
@@ -228,8 +234,9 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
   volume->grid = grid;
   volume->index_min = {box.min().x(), box.min().y(), box.min().z()};
   volume->dims = {dim.x(), dim.y(), dim.z()};
-  const openvdb::Vec3d voxel = transform.voxelSize();
-  volume->spacing = {voxel.x(), voxel.y(), voxel.z()};
+  // The matrix's diagonal, as the origin below and the checks above use: a scale map also
+  // stores a voxel size of its own, which OpenVDB does not check against its scales.
+  volume->spacing = {m(0, 0), m(1, 1), m(2, 2)};
   const openvdb::Vec3d origin = transform.indexToWorld(box.min());
   volume->origin = {origin.x(), origin.y(), origin.z()};
   ISOSTREAM_RETURN_IF_ERROR(CheckWorldBox(volume->dims, volume->spacing, volume->origin, where));
