@@ -25,6 +25,7 @@
 #include "server/hierarchy/prepared_volume.h"
 #include "server/service/volume_histogram.h"
 #include "server/service/worker_pool.h"
+#include "server/volume/quantization.h"
 #include "shared/frame_codec.h"
 
 namespace isostream::service {
@@ -74,11 +75,6 @@ struct CatalogueOptions {
   // tried again (a test hook shortens it: ISOSTREAMD_TEST_RETRY_FAILED_MS).
   std::chrono::milliseconds retry_failed_after{30000};
 };
-
-// The box and bit count for a volume's frames: bits = the fewest that make the quantization
-// step at most 1/32 of the smallest sample spacing, so the error (half a step) is at most 1/64
-// of a voxel. 129^3 at unit spacing: 13 bits; 513^3: 15 bits.
-void QuantizationFor(const Volume& volume, QuantizationBox* box, int* bits);
 
 class VolumeCatalogue {
  public:

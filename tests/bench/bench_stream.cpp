@@ -130,7 +130,7 @@ void CodecBreakdown(const OrderedMesh& mesh, const CodecOptions& options) {
 void CodecFigures(const OrderedMesh& mesh, const Volume& volume) {
   QuantizationBox box;
   int bits;
-  service::QuantizationFor(volume, &box, &bits);
+  QuantizationFor(volume, &box, &bits);
   const double voxel = std::min({volume.spacing[0], volume.spacing[1], volume.spacing[2]});
   std::printf(
       "\ncodec on the frame: %zu triangles, %zu vertices, normals and surface index, "
