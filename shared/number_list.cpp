@@ -23,8 +23,11 @@ absl::StatusOr<std::vector<double>> ParseNumberList(std::string_view text, std::
     const std::string item(field);
     char* stop = nullptr;
     const double v = std::strtod(item.c_str(), &stop);
-    if (item.empty() || stop != item.c_str() + item.size() || !std::isfinite(v))
+    if (item.empty() || stop != item.c_str() + item.size() || std::isnan(v))
       return absl::InvalidArgumentError(std::string(what) + ": '" + item + "' is not a number");
+    if (!std::isfinite(v))  // "inf", or past the double range (1e309)
+      return absl::InvalidArgumentError(std::string(what) + ": '" + item +
+                                        "' is not a finite number");
     out.push_back(v);
     start = end + 1;
   }

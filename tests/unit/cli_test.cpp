@@ -264,6 +264,10 @@ TEST(Cli, InfoPrintsTheTriangleCountByEps) {
   const CliRun early = Cli("info --volume cayley:4097 --iso 0.1,nan --no-cache");
   EXPECT_EQ(early.code, 2);
   EXPECT_NE(early.output.find("'nan' is not a number"), std::string::npos) << early.output;
+  // A number past the double range is one, only not finite (it was called not a number).
+  const CliRun huge = Cli("info --volume cayley:4097 --iso 0.1,1e309 --no-cache");
+  EXPECT_EQ(huge.code, 2);
+  EXPECT_NE(huge.output.find("'1e309' is not a finite number"), std::string::npos) << huge.output;
   const CliRun twice = Cli("info --volume cayley:4097 --iso 0.1,0.1 --no-cache");
   EXPECT_EQ(twice.code, 2);
   EXPECT_NE(twice.output.find("isovalue 0.1 is given twice"), std::string::npos) << twice.output;
