@@ -1,6 +1,7 @@
 // Raw sample files: no header, everything comes from the spec raw:PATH:NXxNYxNZ:TYPE[:le|be].
 #include <string>
 
+#include "absl/strings/match.h"
 #include "server/volume/loaders.h"
 #include "server/volume/sample_reader.h"
 
@@ -16,8 +17,10 @@ absl::StatusOr<VolumePtr> LoadRawFile(const VolumeSpec& spec, const std::atomic<
   const std::string described = std::to_string(spec.dims[0]) + "x" + std::to_string(spec.dims[1]) +
                                 "x" + std::to_string(spec.dims[2]) + " " + spec.sample_type;
 
+  // Compressed only when named so: samples are any bytes, and a plain file whose first two
+  // are gzip's magic was refused as corrupt gzip.
   GzInput input;
-  ISOSTREAM_RETURN_IF_ERROR(input.Open(path));
+  ISOSTREAM_RETURN_IF_ERROR(input.Open(path, !absl::EndsWith(path, ".gz")));
   const int64_t expected =
       int64_t{spec.dims[0]} * spec.dims[1] * spec.dims[2] * SampleBytes(layout.type);
   // More bytes than the spec describes almost always means wrong dims or type, which would load

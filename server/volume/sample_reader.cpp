@@ -184,13 +184,20 @@ absl::Status CheckWorldBox(const std::array<int, 3>& dims, const std::array<doub
 
 GzInput::~GzInput() {
   if (file_ != nullptr) gzclose(file_);
+  if (plain_ != nullptr) std::fclose(plain_);
 }
 
-absl::Status GzInput::Open(const std::string& path) {
+absl::Status GzInput::Open(const std::string& path, bool plain) {
   path_ = path;
   ISOSTREAM_RETURN_IF_ERROR(CheckInputFile(path));
   struct stat st;
   if (::stat(path.c_str(), &st) == 0) disk_size_ = st.st_size;
+  if (plain) {
+    plain_ = std::fopen(path.c_str(), "rb");
+    if (plain_ == nullptr)
+      return absl::PermissionDeniedError(path + ": cannot open: " + std::strerror(errno));
+    return absl::OkStatus();
+  }
   file_ = gzopen(path.c_str(), "rb");
   if (file_ == nullptr) {
     return absl::PermissionDeniedError(path + ": cannot open: " + std::strerror(errno));
@@ -199,7 +206,18 @@ absl::Status GzInput::Open(const std::string& path) {
   return absl::OkStatus();
 }
 
+int64_t GzInput::Tell() const {
+  if (plain_ != nullptr) return int64_t(std::ftell(plain_));
+  return file_ != nullptr ? gztell(file_) : 0;
+}
+
 absl::StatusOr<size_t> GzInput::Read(void* out, size_t size) {
+  if (plain_ != nullptr) {
+    const size_t got = std::fread(out, 1, size, plain_);
+    if (got < size && std::ferror(plain_))
+      return absl::DataLossError(path_ + ": read error: " + std::strerror(errno));
+    return got;
+  }
   size_t done = 0;
   auto* bytes = static_cast<unsigned char*>(out);
   while (done < size) {
@@ -238,6 +256,7 @@ absl::Status GzInput::Skip(size_t size) {
 }
 
 int64_t GzInput::UncompressedSize() const {
+  if (plain_ != nullptr) return disk_size_;
   return file_ != nullptr && gzdirect(file_) ? disk_size_ : -1;
 }
 

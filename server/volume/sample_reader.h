@@ -8,6 +8,7 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <cstdio>
 #include <string>
 #include <string_view>
 
@@ -42,7 +43,8 @@ inline constexpr int kMinCellFloatSteps = 8;
 absl::Status CheckWorldBox(const std::array<int, 3>& dims, const std::array<double, 3>& spacing,
                            const std::array<double, 3>& origin, const std::string& where);
 
-// A file read through zlib's gz* functions, closed on destruction.
+// A file read through zlib's gz* functions (gzip or plain, told by its content), or plainly;
+// closed on destruction.
 class GzInput {
  public:
   GzInput() = default;
@@ -50,17 +52,20 @@ class GzInput {
   GzInput(const GzInput&) = delete;
   GzInput& operator=(const GzInput&) = delete;
 
-  absl::Status Open(const std::string& path);
+  // `plain`: read the bytes as they are, even if they start as gzip does (a raw file's first
+  // sample can: 1f 8b is the first two bytes of 1 float in 65536).
+  absl::Status Open(const std::string& path, bool plain = false);
   // Reads up to SIZE bytes; fewer only at the end of the data. DataLoss on a corrupt stream.
   absl::StatusOr<size_t> Read(void* out, size_t size);
   absl::Status Skip(size_t size);  // DataLoss if the data ends first
   // Bytes on disk when the file is not compressed (known only after the first read), else -1.
   int64_t UncompressedSize() const;
-  int64_t Tell() const { return file_ != nullptr ? gztell(file_) : 0; }  // uncompressed offset
+  int64_t Tell() const;  // uncompressed offset
   const std::string& path() const { return path_; }
 
  private:
   gzFile file_ = nullptr;
+  std::FILE* plain_ = nullptr;  // instead of file_
   std::string path_;
   int64_t disk_size_ = -1;
 };

@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <string>
@@ -144,6 +145,28 @@ TEST(VolumeLoadFiles, StopFlagCancelsRawAndNiftiReads) {
     stop = false;
     EXPECT_TRUE(LoadVolume(spec, VolumeLimits{}, &stop).ok()) << spec;
   }
+}
+
+// Samples are any bytes: a plain file whose first two are gzip's magic (1f 8b: the first
+// float here, 0.744...) is read as it is; it was taken for gzip and refused as corrupt. A raw
+// file is compressed only when its name ends in .gz (found by a reviewing helper).
+TEST(VolumeLoadRaw, APlainFileStartingAsGzipDoesIsPlain) {
+  std::vector<unsigned char> bytes = Samples(Type::kFloat32, {4, 4, 4}, false);
+  const unsigned char magic[4] = {0x1f, 0x8b, 0x3e, 0x3f};
+  std::memcpy(bytes.data(), magic, 4);
+  float first = 0;
+  std::memcpy(&first, magic, 4);
+  const std::string path = ScratchPath("gzmagic.raw");
+  WriteBytes(path, bytes);
+  absl::StatusOr<VolumePtr> v = LoadVolume("raw:" + path + ":4x4x4:float32");
+  ASSERT_TRUE(v.ok()) << v.status();
+  ExpectSamples(**v, [&](int64_t i) {
+    return i == 0 ? first : static_cast<float>(StoredValue(Type::kFloat32, i));
+  });
+  WriteGz(path + ".gz", bytes);  // named so, it is gunzipped
+  absl::StatusOr<VolumePtr> gz = LoadVolume("raw:" + path + ".gz:4x4x4:float32");
+  ASSERT_TRUE(gz.ok()) << gz.status();
+  EXPECT_EQ((*gz)->min_value, (*v)->min_value);
 }
 
 TEST(VolumeLoadRaw, PathMayContainColons) {
