@@ -150,7 +150,7 @@ TEST(VolumeLoadFiles, StopFlagCancelsRawAndNiftiReads) {
 // Samples are any bytes: a plain file whose first two are gzip's magic (1f 8b: the first
 // float here, 0.744...) is read as it is; it was taken for gzip and refused as corrupt. A raw
 // file is compressed only when its name ends in .gz (found by a reviewing helper).
-TEST(VolumeLoadRaw, APlainFileStartingAsGzipDoesIsPlain) {
+TEST(VolumeLoadRaw, APlainFileStartingLikeGzipIsReadPlainly) {
   std::vector<unsigned char> bytes = Samples(Type::kFloat32, {4, 4, 4}, false);
   const unsigned char magic[4] = {0x1f, 0x8b, 0x3e, 0x3f};
   std::memcpy(bytes.data(), magic, 4);
