@@ -316,7 +316,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   if (remembered) {
     eps = *remembered;
   } else if (r.budget > 0) {
-    // Triangle count never grows with eps (saturated eta nests the meshes) and changes only
+    // Triangle count never grows with eps (saturated eta nests the meshes; clipping at the
+    // data box can break this at a few codes: ARCHITECTURE.md, "Budget") and changes only
     // at eta codes: the answer is the smallest code whose count fits (budget_search.h), found
     // by passes that count only, stop at 4x the budget and gather the count at every coarser
     // code on the way (count_curve.h; node by node, as blocks skip the etas it needs).
