@@ -2,7 +2,7 @@
 //
 // The triangle count at an eps does not depend on the view (only the order does), so the eps
 // for a budget is the same for every view of a volume: a session orbiting with a budget
-// searches once (about 7 counting passes) instead of on every frame. The owner of a hierarchy
+// searches once (1-6 counting passes) instead of on every frame. The owner of a hierarchy
 // owns its memo; entries are the search's own results, so a hit gives exactly the mesh a new
 // search would.
 #pragma once
