@@ -46,7 +46,8 @@ void AppendText(std::string* out, uint32_t value) {
 std::string PlyHeader(const OrderedMesh& mesh, bool binary) {
   return absl::StrCat("ply\nformat ", binary ? "binary_little_endian" : "ascii",
                       " 1.0\n"
-                      "comment isostream OrderedMesh: faces in draw order (back to front unless extracted unordered)\n"
+                      "comment isostream OrderedMesh: faces in draw order"
+                      " (back to front unless extracted unordered)\n"
                       "element vertex ",
                       mesh.vertex_count(),
                       "\n"
