@@ -347,30 +347,37 @@ class StuckSink : public ChunkSink {
   mutable std::mutex mu_;
 };
 
-TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
+// Produces one frame of buckyball:65 (isovalues `isos`, `eps`, the eye at x = 3) with
+// `settings` and `encoders` encoding threads into `sink`, which never drains.
+absl::Status ProduceIntoStuckSink(const FrameSettings& settings, const std::vector<float>& isos,
+                                  double eps, int encoders, StuckSink* sink) {
   CatalogueOptions o;
   VolumeCatalogue catalogue(o);
   auto volume = catalogue.Get("buckyball:65");
-  ASSERT_TRUE(volume.ok()) << volume.status();
-  WorkerPool encoders(2);
+  if (!volume.ok()) return volume.status();
+  WorkerPool pool(encoders);
   ServerCounters counters;
+  FrameProducer producer(settings, &pool, &counters);
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  for (float iso : isos) view.add_surfaces()->set_isovalue(iso);
+  view.set_eps(eps);
+  view.mutable_camera()->mutable_eye()->set_x(3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  if (!request.ok()) return request.status();
+  std::atomic<bool> cancel{false};
+  const auto now = std::chrono::steady_clock::now();
+  return producer.Run(**volume, view, *request, 1, &cancel, sink, now, now);
+}
+
+TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
   FrameSettings settings;
   settings.chunk_triangles = 2048;
   settings.first_chunk_triangles = 2048;
   settings.max_queued_chunks = 4;
   settings.deadline_ms = 300;
-  FrameProducer producer(settings, &encoders, &counters);
-  ::isostream::v1::ViewRequest view;
-  view.set_volume("buckyball:65");
-  for (float iso : {0.05f, 0.15f}) view.add_surfaces()->set_isovalue(iso);
-  view.set_eps(0.002);
-  view.mutable_camera()->mutable_eye()->set_x(3);
-  auto request = ToExtractRequest(view, Limits{}, 0);
-  ASSERT_TRUE(request.ok()) << request.status();
-  std::atomic<bool> cancel{false};
   StuckSink sink;
-  const auto now = std::chrono::steady_clock::now();
-  const absl::Status s = producer.Run(**volume, view, *request, 1, &cancel, &sink, now, now);
+  const absl::Status s = ProduceIntoStuckSink(settings, {0.05f, 0.15f}, 0.002, 2, &sink);
   EXPECT_EQ(s.code(), absl::StatusCode::kDeadlineExceeded) << s;
   EXPECT_LE(sink.chunks_.size(), 4u);  // never more than max_queued_chunks held
   for (size_t i = 0; i < sink.chunks_.size(); ++i) EXPECT_EQ(sink.chunks_[i].chunk_index(), i);
@@ -383,33 +390,18 @@ TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
 // the deadline and other frames ran on their own threads alone.
 TEST(FrameProducer, AStuckClientLeavesTheSharedWorkersFree) {
   if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "TBB has no worker thread";
-  CatalogueOptions o;
-  VolumeCatalogue catalogue(o);
-  auto volume = catalogue.Get("buckyball:65");
-  ASSERT_TRUE(volume.ok()) << volume.status();
-  WorkerPool encoders(1);
-  ServerCounters counters;
   FrameSettings settings;
   settings.chunk_triangles = 1024;
   settings.first_chunk_triangles = 1024;
   settings.max_queued_chunks = 2;
   settings.deadline_ms = 2500;
-  FrameProducer producer(settings, &encoders, &counters);
-  ::isostream::v1::ViewRequest view;
-  view.set_volume("buckyball:65");
-  for (float iso : {0.05f, 0.15f, 0.25f}) view.add_surfaces()->set_isovalue(iso);
-  view.set_eps(0.0);
-  view.mutable_camera()->mutable_eye()->set_x(3);
-  auto request = ToExtractRequest(view, Limits{}, 0);
-  ASSERT_TRUE(request.ok()) << request.status();
-  std::atomic<bool> cancel{false};
   StuckSink sink;
   absl::Status stuck;
   std::thread frame([&] {
-    const auto now = std::chrono::steady_clock::now();
-    stuck = producer.Run(**volume, view, *request, 1, &cancel, &sink, now, now);
+    stuck = ProduceIntoStuckSink(settings, {0.05f, 0.15f, 0.25f}, 0.0, 1, &sink);
   });
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // its queue is full by now
+  // The volume prepared and the frame's queue full by now.
+  std::this_thread::sleep_for(std::chrono::milliseconds(800));
   // Work another frame would give the workers: slow items, so that a free worker joins.
   std::mutex mu;
   std::set<std::thread::id> threads;

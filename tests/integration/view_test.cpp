@@ -199,6 +199,18 @@ TEST(View, WindowModeShowsTheFrameUnderXvfb) {
   EXPECT_GT(Coverage(*image), 0.05);
 }
 
+// The viewer's window under a virtual X server against `daemon`, with `view_args`; 3 s after
+// it starts, xdotool focuses it and does `actions` (it must close itself: --exit-after).
+testing::CommandResult WindowWithInput(const testing::DaemonProcess& daemon,
+                                       const std::string& view_args, const std::string& actions) {
+  const std::string view =
+      std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() + " " + view_args;
+  return testing::RunCommand("timeout 60 xvfb-run -a -s '-screen 0 640x480x24' sh -c '" + view +
+                             " & pid=$!; sleep 3; xdotool search --sync --name isostream-view"
+                             " windowfocus --sync " +
+                             actions + "; wait $pid'");
+}
+
 // A frame past the daemon's deadline ends the window with that error: it was taken for the
 // daemon closing an idle session, and the window waited for a move that would reopen it (with
 // --exit-after, until killed, without a screenshot).
@@ -230,15 +242,10 @@ TEST(View, WindowZoomedOutStillShowsTheSurfaces) {
   testing::DaemonProcess daemon;
   ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
   const std::string png = dir.path() + "/zoomed.png";
-  const std::string view = std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
-                           " --volume cayley:65 --iso 0 --eps 0.01 --size 240x200 --window"
-                           " --exit-after 2 -o " +
-                           png;
-  const std::string cmd = "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' sh -c '" + view +
-                          " & pid=$!; sleep 3; xdotool search --sync --name isostream-view"
-                          " windowfocus --sync mousemove --window %1 120 100"
-                          " click --repeat 8 --delay 0 5; wait $pid'";  // one burst: one view
-  const testing::CommandResult run = testing::RunCommand(cmd);
+  const testing::CommandResult run = WindowWithInput(
+      daemon,
+      "--volume cayley:65 --iso 0 --eps 0.01 --size 240x200 --window --exit-after 2 -o " + png,
+      "mousemove --window %1 120 100 click --repeat 8 --delay 0 5");  // one burst: one view
   ASSERT_EQ(run.code, 0) << run.output;
   auto image = render::ReadPng(png);
   ASSERT_TRUE(image.ok()) << image.status();
@@ -255,14 +262,12 @@ TEST(View, WindowReopensASessionTheDaemonClosedAsIdle) {
   testing::DaemonProcess daemon;
   ASSERT_TRUE(daemon.Start({"--no-cache", "--idle-timeout-s", "1"}, dir.path() + "/daemon.log"));
   const std::string png = dir.path() + "/window.png";
-  const std::string view = std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
-                           " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01"
-                           " --eye 2.2,1.6,2.8 --size 240x200 --window --exit-after 2 -o " +
-                           png;
-  const std::string cmd = "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' sh -c '" + view +
-                          " & pid=$!; sleep 3; xdotool search --sync --name isostream-view"
-                          " windowfocus --sync key r; wait $pid'";
-  const testing::CommandResult run = testing::RunCommand(cmd);
+  const testing::CommandResult run =
+      WindowWithInput(daemon,
+                      "--volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01 --eye 2.2,1.6,2.8"
+                      " --size 240x200 --window --exit-after 2 -o " +
+                          png,
+                      "key r");
   ASSERT_EQ(run.code, 0) << run.output;
   auto image = render::ReadPng(png);
   ASSERT_TRUE(image.ok()) << image.status();
