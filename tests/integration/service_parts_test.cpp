@@ -347,10 +347,17 @@ class StuckSink : public ChunkSink {
   mutable std::mutex mu_;
 };
 
-// Produces one frame of buckyball:65 (isovalues `isos`, `eps`, the eye at x = 3) with
-// `settings` and `encoders` encoding threads into `sink`, which never drains.
-absl::Status ProduceIntoStuckSink(const FrameSettings& settings, const std::vector<float>& isos,
-                                  double eps, int encoders, StuckSink* sink) {
+// Produces one frame of buckyball:65 (isovalues `isos`, `eps`, the eye at x = 3) in chunks of
+// `chunk` triangles, at most `queued` held, with a deadline of `deadline_ms` and `encoders`
+// encoding threads, into `sink`, which never drains.
+absl::Status ProduceIntoStuckSink(int chunk, int queued, int deadline_ms,
+                                  const std::vector<float>& isos, double eps, int encoders,
+                                  StuckSink* sink) {
+  FrameSettings settings;
+  settings.chunk_triangles = chunk;
+  settings.first_chunk_triangles = chunk;
+  settings.max_queued_chunks = queued;
+  settings.deadline_ms = deadline_ms;
   CatalogueOptions o;
   VolumeCatalogue catalogue(o);
   auto volume = catalogue.Get("buckyball:65");
@@ -371,13 +378,8 @@ absl::Status ProduceIntoStuckSink(const FrameSettings& settings, const std::vect
 }
 
 TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
-  FrameSettings settings;
-  settings.chunk_triangles = 2048;
-  settings.first_chunk_triangles = 2048;
-  settings.max_queued_chunks = 4;
-  settings.deadline_ms = 300;
   StuckSink sink;
-  const absl::Status s = ProduceIntoStuckSink(settings, {0.05f, 0.15f}, 0.002, 2, &sink);
+  const absl::Status s = ProduceIntoStuckSink(2048, 4, 300, {0.05f, 0.15f}, 0.002, 2, &sink);
   EXPECT_EQ(s.code(), absl::StatusCode::kDeadlineExceeded) << s;
   EXPECT_LE(sink.chunks_.size(), 4u);  // never more than max_queued_chunks held
   for (size_t i = 0; i < sink.chunks_.size(); ++i) EXPECT_EQ(sink.chunks_[i].chunk_index(), i);
@@ -390,15 +392,10 @@ TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
 // the deadline and other frames ran on their own threads alone.
 TEST(FrameProducer, AStuckClientLeavesTheSharedWorkersFree) {
   if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "TBB has no worker thread";
-  FrameSettings settings;
-  settings.chunk_triangles = 1024;
-  settings.first_chunk_triangles = 1024;
-  settings.max_queued_chunks = 2;
-  settings.deadline_ms = 2500;
   StuckSink sink;
   absl::Status stuck;
   std::thread frame([&] {
-    stuck = ProduceIntoStuckSink(settings, {0.05f, 0.15f, 0.25f}, 0.0, 1, &sink);
+    stuck = ProduceIntoStuckSink(1024, 2, 2500, {0.05f, 0.15f, 0.25f}, 0.0, 1, &sink);
   });
   // The volume prepared and the frame's queue full by now.
   std::this_thread::sleep_for(std::chrono::milliseconds(800));
