@@ -4,5 +4,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/install-deps.sh
 ./scripts/build.sh
-cd build
+cd "${BUILD_DIR:-build}"  # as build.sh
 ctest --output-on-failure -j"$(nproc 2>/dev/null || echo 2)" --timeout 600
