@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cstdio>
+#include <string>
 
 #include "server/hierarchy/hierarchy.h"
 #include "server/volume/load.h"
@@ -18,8 +20,8 @@ TEST(PrepareVolume, KeepsTheFactsAndTheSamplesAndReleasesTheGrid) {
   for (const char* spec : {"cayley:17", "buckyball:20"}) {  // 2^k + 1 and padded
     auto loaded = LoadVolume(spec);
     ASSERT_TRUE(loaded.ok()) << loaded.status();
-    auto prepared = PrepareVolume(spec, VolumeLimits{}, HierarchyCacheOptions{},
-                                  HierarchyBuildOptions{});
+    auto prepared =
+        PrepareVolume(spec, VolumeLimits{}, HierarchyCacheOptions{}, HierarchyBuildOptions{});
     ASSERT_TRUE(prepared.ok()) << prepared.status();
     const Volume& v = **loaded;
     const Volume& p = *prepared->volume;
@@ -34,10 +36,31 @@ TEST(PrepareVolume, KeepsTheFactsAndTheSamplesAndReleasesTheGrid) {
       for (int y = 0; y < v.dims[1]; ++y)
         for (int x = 0; x < v.dims[0]; ++x)
           ASSERT_EQ(prepared->hierarchy->sample(x, y, z),
-                    accessor.getValue(openvdb::Coord(v.index_min[0] + x, v.index_min[1] + y,
-                                                     v.index_min[2] + z)))
+                    accessor.getValue(
+                        openvdb::Coord(v.index_min[0] + x, v.index_min[1] + y, v.index_min[2] + z)))
               << spec << " at " << x << "," << y << "," << z;
   }
+}
+
+// max_voxels bounds the cube a volume is held in, not only its samples: a 33x2x2 volume of 132
+// samples is a 33^3 cube (it was prepared at any max_voxels its samples fitted).
+TEST(PrepareVolume, MaxVoxelsBoundsThePaddedCube) {
+  VolumeLimits limits;
+  limits.max_voxels = 20 * 20 * 20;
+  const std::string path = ::testing::TempDir() + "/thin_33x2x2.raw";
+  {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    ASSERT_NE(f, nullptr);
+    for (int i = 0; i < 33 * 2 * 2; ++i) std::fputc(i % 7, f);
+    std::fclose(f);
+  }
+  const std::string spec = "raw:" + path + ":33x2x2:uint8";
+  ASSERT_TRUE(LoadVolume(spec, limits).ok());
+  const auto prepared = PrepareVolume(spec, limits, HierarchyCacheOptions{}, {});
+  EXPECT_EQ(prepared.status().code(), absl::StatusCode::kResourceExhausted) << prepared.status();
+  EXPECT_NE(prepared.status().message().find("33^3 cube"), std::string::npos) << prepared.status();
+  limits.max_voxels = 33 * 33 * 33;
+  EXPECT_TRUE(PrepareVolume(spec, limits, HierarchyCacheOptions{}, {}).ok());
 }
 
 // A stop flag that is set (a daemon shutting down) ends the generator's sampling, the
@@ -61,10 +84,10 @@ TEST(PrepareVolume, GivesUpWhenToldToStop) {
   stop = false;
   const auto whole = PrepareVolume("cayley:17", VolumeLimits{}, HierarchyCacheOptions{}, build);
   ASSERT_TRUE(whole.ok()) << whole.status();
-  EXPECT_EQ(whole->hierarchy->sample(3, 5, 7), (*loaded)->grid->getConstAccessor().getValue(
-                                                    openvdb::Coord((*loaded)->index_min[0] + 3,
-                                                                   (*loaded)->index_min[1] + 5,
-                                                                   (*loaded)->index_min[2] + 7)));
+  EXPECT_EQ(
+      whole->hierarchy->sample(3, 5, 7),
+      (*loaded)->grid->getConstAccessor().getValue(openvdb::Coord(
+          (*loaded)->index_min[0] + 3, (*loaded)->index_min[1] + 5, (*loaded)->index_min[2] + 7)));
 }
 
 }  // namespace
