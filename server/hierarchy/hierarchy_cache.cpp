@@ -160,12 +160,7 @@ bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples
     return false;
   };
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
-  if (fd < 0) {
-    const std::string reason = std::strerror(errno);
-    TemporariesInProgress::Get().Remove(tmp_name);
-    *why = "cannot create cache file " + tmp + ": " + reason;
-    return false;
-  }
+  if (fd < 0) return fail("cannot create cache file " + tmp + ": " + std::strerror(errno));
   std::FILE* out = ::fdopen(fd, "wb");
   if (out == nullptr) {
     ::close(fd);
