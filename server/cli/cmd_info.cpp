@@ -84,6 +84,7 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
               (long long)v.voxel_count());
   std::printf("spacing       %g %g %g\n", v.spacing[0], v.spacing[1], v.spacing[2]);
   std::printf("origin        %g %g %g\n", v.origin[0], v.origin[1], v.origin[2]);
+  if (!v.orientation.empty()) std::printf("orientation   %s\n", v.orientation.c_str());
   std::printf("value range   [%g, %g]\n", v.min_value, v.max_value);
   std::printf("hierarchy     cube %d^3 (k = %d), %d bisection levels, %zu refinement vertices\n", n,
               h.k(), 3 * h.k(), h.point_count() - 8);

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "server/volume/loaders.h"
+#include "server/volume/orientation.h"
 #include "server/volume/sample_reader.h"
 #include "shared/number_list.h"
 
@@ -24,6 +25,7 @@ constexpr int kSclSlopeOffset = 112;   // float
 constexpr int kSclInterOffset = 116;   // float
 constexpr int kQformCodeOffset = 252;  // short
 constexpr int kSformCodeOffset = 254;  // short
+constexpr int kQuaternOffset = 256;    // float quatern_b, _c, _d
 constexpr int kQoffsetOffset = 268;    // float qoffset_x, _y, _z
 constexpr int kSrowOffset = 280;       // float srow_x[4], srow_y[4], srow_z[4]
 constexpr int kMagicOffset = 344;      // char[4]
@@ -57,6 +59,60 @@ class HeaderView {
   const unsigned char* bytes_;
   bool swap_;
 };
+
+// Where the samples lie in the world (nifti1.h, "3D image orientation and location"): the
+// sform's matrix if it is set and usable, else the qform's rotation and offset with the pixdim
+// steps (pixdim[0] < 0 reverses the third axis), else the steps alone ("method 1", ANALYZE).
+// A non-finite offset is taken as 0.
+absl::StatusOr<Orientation> FileOrientation(const HeaderView& h,
+                                            const std::array<double, 3>& steps,
+                                            const std::array<int, 3>& dims,
+                                            const std::string& path) {
+  std::array<std::array<double, 3>, 3> m{};
+  std::array<double, 3> offset{0, 0, 0};
+  auto finite_offset = [&] {
+    for (double& o : offset)
+      if (!std::isfinite(o)) o = 0;
+  };
+  if (h.I16(kSformCodeOffset) > 0) {
+    for (int r = 0; r < 3; ++r) {
+      for (int i = 0; i < 3; ++i) m[r][i] = h.F32(kSrowOffset + 16 * r + 4 * i);
+      offset[r] = h.F32(kSrowOffset + 16 * r + 12);
+    }
+    finite_offset();
+    absl::StatusOr<Orientation> o = NearestAxes(m, offset, dims);
+    if (o.ok()) return o;
+    // An unusable sform matrix (some writers fill in only its offsets) falls back to the qform,
+    // else to the steps alone with the sform's offset.
+    m = {};
+  }
+  if (h.I16(kQformCodeOffset) > 0) {
+    double b = h.F32(kQuaternOffset), c = h.F32(kQuaternOffset + 4), d = h.F32(kQuaternOffset + 8);
+    if (!std::isfinite(b) || !std::isfinite(c) || !std::isfinite(d))
+      return absl::InvalidArgumentError(path + ": qform quaternion is not finite");
+    double a2 = 1 - (b * b + c * c + d * d);
+    if (a2 < 1e-7) {  // a 180-degree turn, rounded past the unit sphere: normalise (b, c, d)
+      const double norm = std::sqrt(b * b + c * c + d * d);
+      b /= norm, c /= norm, d /= norm;
+      a2 = 0;
+    }
+    const double a = std::sqrt(a2);
+    const double rotation[3][3] = {
+        {a * a + b * b - c * c - d * d, 2 * (b * c - a * d), 2 * (b * d + a * c)},
+        {2 * (b * c + a * d), a * a + c * c - b * b - d * d, 2 * (c * d - a * b)},
+        {2 * (b * d - a * c), 2 * (c * d + a * b), a * a + d * d - c * c - b * b}};
+    const double qfac = h.F32(kPixdimOffset) < 0 ? -1 : 1;
+    for (int r = 0; r < 3; ++r)
+      for (int i = 0; i < 3; ++i) m[r][i] = rotation[r][i] * steps[i] * (i == 2 ? qfac : 1);
+    for (int r = 0; r < 3; ++r) offset[r] = h.F32(kQoffsetOffset + 4 * r);
+    finite_offset();
+  } else {
+    for (int i = 0; i < 3; ++i) m[i][i] = steps[i];
+  }
+  absl::StatusOr<Orientation> o = NearestAxes(m, offset, dims);
+  if (!o.ok()) return absl::InvalidArgumentError(path + ": qform: " + std::string(o.status().message()));
+  return o;
+}
 
 }  // namespace
 
@@ -128,10 +184,10 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
     layout.inter = std::isfinite(inter) ? inter : 0.0;
   }
 
-  // Spacing from pixdim (sign belongs to the orientation, not the step). A pixdim of 0 is
+  // Steps from pixdim (sign belongs to the orientation, not the step). A pixdim of 0 is
   // "not set" (some writers leave it so): unit spacing, as other NIfTI readers take it. One that
   // is not a number, or infinite, is a damaged header: refused rather than guessed.
-  std::array<double, 3> spacing;
+  std::array<double, 3> spacing;  // of the file's axes
   for (int i = 0; i < 3; ++i) {
     const double p = std::fabs(h.F32(kPixdimOffset + 4 * (i + 1)));
     if (!std::isfinite(p))
@@ -139,17 +195,13 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
                                         "] (the voxel spacing) is not a finite number");
     spacing[i] = p > 0 ? p : 1.0;
   }
-  // Origin: the world position of voxel (0,0,0) from sform, else qform, else 0. The orientation
-  // (rotation, flips) is not applied: samples stay on an axis-aligned grid.
-  std::array<double, 3> origin{0, 0, 0};
-  if (h.I16(kSformCodeOffset) > 0) {
-    for (int i = 0; i < 3; ++i) origin[i] = h.F32(kSrowOffset + 16 * i + 12);
-  } else if (h.I16(kQformCodeOffset) > 0) {
-    for (int i = 0; i < 3; ++i) origin[i] = h.F32(kQoffsetOffset + 4 * i);
-  }
-  for (double& o : origin) {
-    if (!std::isfinite(o)) o = 0;
-  }
+  ISOSTREAM_ASSIGN_OR_RETURN(const Orientation orientation,
+                             FileOrientation(h, spacing, layout.dims, path));
+  // The samples are read as stored, with the file's axes' steps, then turned onto the world's.
+  std::array<double, 3> file_spacing;
+  for (int a = 0; a < 3; ++a) file_spacing[orientation.source[a]] = orientation.spacing[a];
+  ISOSTREAM_RETURN_IF_ERROR(
+      CheckWorldBox(orientation.dims, orientation.spacing, orientation.origin, path));
 
   const float vox_offset = h.F32(kVoxOffsetOffset);
   if (!(vox_offset >= kHeaderSize) || vox_offset > 1e9f) {
@@ -160,7 +212,11 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
   ISOSTREAM_RETURN_IF_ERROR(input.Skip(static_cast<size_t>(vox_offset) - kHeaderSize));
 
   std::string grid_name = path.substr(path.find_last_of('/') + 1);
-  return ReadSamples(input, layout, spec, grid_name, spacing, origin, stop);
+  ISOSTREAM_ASSIGN_OR_RETURN(
+      VolumePtr stored,
+      ReadSamples(input, layout, spec, grid_name, file_spacing, orientation.origin, stop));
+  if (orientation.identity() && orientation.off_axis_degrees == 0) return stored;
+  return Reorient(std::move(stored), orientation);
 }
 
 }  // namespace isostream

@@ -23,6 +23,8 @@ struct Volume {
   std::array<double, 3> origin{0, 0, 0};   // world position of sample (0, 0, 0)
   float min_value = 0;                     // over all samples (finite by construction)
   float max_value = 0;
+  // How the file's axes were turned onto the world's (orientation.h); empty when as stored.
+  std::string orientation;
 
   int64_t voxel_count() const { return int64_t{dims[0]} * dims[1] * dims[2]; }
 };

@@ -17,6 +17,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -205,6 +206,10 @@ struct NiftiFile {
   std::array<float, 3> sform_offset{0, 0, 0};
   int16_t qform_code = 0;
   std::array<float, 3> qoffset{0, 0, 0};
+  std::array<float, 3> quatern{0, 0, 0};  // b, c, d
+  float qfac = 1;                         // pixdim[0]
+  // The sform's 3x3 part ([row][column]), when set; else pixdim on its diagonal.
+  std::optional<std::array<std::array<float, 3>, 3>> srow;
   bool big_endian = false;
   const char* magic = "n+1";
   int32_t sizeof_hdr = 348;
@@ -218,17 +223,19 @@ struct NiftiFile {
     PutAt<int16_t>(h, 48, dim4, be);
     PutAt<int16_t>(h, 70, datatype, be);
     PutAt<int16_t>(h, 72, bitpix, be);
-    PutAt<float>(h, 76, 1.0f, be);  // pixdim[0]: qfac
+    PutAt<float>(h, 76, qfac, be);  // pixdim[0]
     for (int i = 0; i < 3; ++i) PutAt<float>(h, 80 + 4 * i, pixdim[i], be);
     PutAt<float>(h, 108, vox_offset, be);
     PutAt<float>(h, 112, slope, be);
     PutAt<float>(h, 116, inter, be);
     PutAt<int16_t>(h, 252, qform_code, be);
     PutAt<int16_t>(h, 254, sform_code, be);
+    for (int i = 0; i < 3; ++i) PutAt<float>(h, 256 + 4 * i, quatern[i], be);
     for (int i = 0; i < 3; ++i) PutAt<float>(h, 268 + 4 * i, qoffset[i], be);
-    for (int i = 0; i < 3; ++i) {
-      PutAt<float>(h, 280 + 16 * i + 4 * i, pixdim[i], be);  // srow diagonal
-      PutAt<float>(h, 280 + 16 * i + 12, sform_offset[i], be);
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c)
+        PutAt<float>(h, 280 + 16 * r + 4 * c, srow ? (*srow)[r][c] : r == c ? pixdim[r] : 0, be);
+      PutAt<float>(h, 280 + 16 * r + 12, sform_offset[r], be);
     }
     std::memcpy(h.data() + 344, magic, std::strlen(magic) + 1);
     // Bytes between the header and vox_offset (extension flag, extensions) are skipped.

@@ -1,0 +1,154 @@
+// NIfTI orientation: samples stored with axes reversed, swapped or rotated are held on the
+// world's axes, each at the world position the file's sform or qform gives it.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "server/volume/orientation.h"
+#include "tests/unit/volume_files.h"
+
+namespace isostream {
+namespace {
+
+using namespace volume_files;
+using Matrix = std::array<std::array<double, 3>, 3>;
+
+// Every file sample v (value: its x-fastest index, float32 samples) is found in the loaded
+// volume at the grid point whose world position origin + spacing * p is m * v + offset, and the
+// grid's own transform puts it there too.
+void ExpectPlaced(const Volume& vol, const std::array<int, 3>& file_dims, const Matrix& m,
+                  const std::array<double, 3>& offset, double tolerance = 1e-9) {
+  int64_t index = 0;
+  for (int k = 0; k < file_dims[2]; ++k)
+    for (int j = 0; j < file_dims[1]; ++j)
+      for (int i = 0; i < file_dims[0]; ++i, ++index) {
+        const int v[3] = {i, j, k};
+        int p[3];
+        for (int a = 0; a < 3; ++a) {
+          double w = offset[a];
+          for (int c = 0; c < 3; ++c) w += m[a][c] * v[c];
+          const double steps = (w - vol.origin[a]) / vol.spacing[a];
+          p[a] = int(std::lround(steps));
+          ASSERT_NEAR(steps, p[a], tolerance) << "file sample " << i << "," << j << "," << k;
+          ASSERT_GE(p[a], 0);
+          ASSERT_LT(p[a], vol.dims[a]);
+        }
+        ASSERT_EQ(Sample(vol, p[0], p[1], p[2]), StoredValue(Type::kFloat32, index))
+            << "file sample " << i << "," << j << "," << k;
+        const openvdb::Vec3d g = vol.grid->indexToWorld(openvdb::Coord(
+            vol.index_min[0] + p[0], vol.index_min[1] + p[1], vol.index_min[2] + p[2]));
+        for (int a = 0; a < 3; ++a) {
+          double w = offset[a];
+          for (int c = 0; c < 3; ++c) w += m[a][c] * v[c];
+          ASSERT_NEAR(g[a], w, tolerance);
+        }
+      }
+}
+
+// File axis i along world -z (step 2), j along +x (1.5), k along -y (3): every axis moved, two
+// reversed; dims of 9+ cross a leaf boundary, so reversed leaves must land on whole leaves.
+TEST(VolumeOrientation, SformReversedAndSwappedAxes) {
+  NiftiFile nf;
+  nf.dims = {11, 4, 9};
+  nf.sform_code = 2;
+  nf.srow = std::array<std::array<float, 3>, 3>{{{0, 1.5f, 0}, {0, 0, -3}, {-2, 0, 0}}};
+  nf.sform_offset = {10, 20, 30};
+  nf.pixdim = {2, 1.5f, 3};
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "sform_turned.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  const Volume& vol = **v;
+  EXPECT_EQ(vol.dims, (std::array<int, 3>{4, 9, 11}));
+  EXPECT_EQ(vol.spacing, (std::array<double, 3>{1.5, 3, 2}));
+  // The first sample is the file's (0, 0, 8) on y and (10, 0, 0) on z.
+  EXPECT_EQ(vol.origin, (std::array<double, 3>{10, 20 - 3 * 8, 30 - 2 * 10}));
+  EXPECT_EQ(vol.orientation, "file axes i j k on world -z +x -y");
+  const Matrix m{{{0, 1.5, 0}, {0, 0, -3}, {-2, 0, 0}}};
+  ExpectPlaced(vol, nf.dims, m, {10, 20, 30});
+}
+
+// The qform: a quarter turn about z, and qfac -1 reversing the third axis.
+TEST(VolumeOrientation, QformQuarterTurnAndQfac) {
+  NiftiFile nf;
+  nf.dims = {10, 3, 17};
+  nf.qform_code = 1;
+  const float h = float(std::sqrt(0.5));
+  nf.quatern = {0, 0, h};  // a = cos 45, axis z
+  nf.qfac = -1;
+  nf.pixdim = {2, 3, 4};
+  nf.qoffset = {-5, 6, 7};
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "qform_turned.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  const Volume& vol = **v;
+  // R = [[0,-1,0],[1,0,0],[0,0,1]]; columns scaled by 2, 3, -4.
+  const Matrix m{{{0, -3, 0}, {2, 0, 0}, {0, 0, -4}}};
+  EXPECT_EQ(vol.dims, (std::array<int, 3>{3, 10, 17}));
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(vol.spacing[a], (std::array<double, 3>{3, 2, 4})[a], 1e-6);
+  EXPECT_EQ(vol.orientation, "file axes i j k on world +y -x -z");
+  // The quaternion's float rounding leaves entries of ~1e-7 off the axes.
+  ExpectPlaced(vol, nf.dims, m, {-5, 6, 7}, 1e-5);
+}
+
+// A grid rotated 10 degrees about z keeps its samples on the nearest axes, and says so.
+TEST(VolumeOrientation, ObliqueGridTakesTheNearestAxesAndSaysSo) {
+  NiftiFile nf;
+  const double t = 10 * M_PI / 180;
+  nf.sform_code = 1;
+  nf.srow = std::array<std::array<float, 3>, 3>{
+      {{float(std::cos(t)), float(-std::sin(t)), 0}, {float(std::sin(t)), float(std::cos(t)), 0},
+       {0, 0, 1}}};
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "oblique.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->dims, nf.dims);
+  EXPECT_NE((*v)->orientation.find("rotated 10 degrees"), std::string::npos) << (*v)->orientation;
+  ExpectSamples(**v, [](int64_t i) { return float(StoredValue(Type::kFloat32, i)); });
+}
+
+// A file as stored (the common case) is not rebuilt and has no note.
+TEST(VolumeOrientation, AxisAlignedFileIsAsStored) {
+  NiftiFile nf;
+  nf.sform_code = 1;
+  nf.pixdim = {0.5f, 2, 3};
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "aligned.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->orientation, "");
+  EXPECT_EQ((*v)->index_min, (std::array<int, 3>{0, 0, 0}));
+  EXPECT_EQ((*v)->spacing, (std::array<double, 3>{0.5, 2, 3}));
+}
+
+// An sform without a usable matrix (only its offset filled in) falls back to the qform's
+// rotation, or to pixdim's steps with the sform's offset.
+TEST(VolumeOrientation, UnusableSformFallsBack) {
+  NiftiFile nf;
+  nf.sform_code = 1;
+  nf.srow = std::array<std::array<float, 3>, 3>{};
+  nf.sform_offset = {1, 2, 3};
+  nf.pixdim = {2, 2, 2};
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "zero_sform.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->spacing, (std::array<double, 3>{2, 2, 2}));
+  EXPECT_EQ((*v)->origin, (std::array<double, 3>{1, 2, 3}));
+
+  nf.qform_code = 1;
+  nf.qfac = -1;
+  nf.qoffset = {4, 5, 6};
+  v = WriteAndLoad(nf, "zero_sform_qform.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->orientation, "file axes i j k on world +x +y -z");
+  EXPECT_EQ((*v)->origin, (std::array<double, 3>{4, 5, 6 - 2.0 * (nf.dims[2] - 1)}));
+}
+
+TEST(VolumeOrientation, NearestAxesRefusesSingularAndNonFiniteMatrices) {
+  const std::array<int, 3> dims{2, 2, 2};
+  EXPECT_FALSE(NearestAxes(Matrix{{{1, 0, 0}, {0, 1, 0}, {0, 0, 0}}}, {0, 0, 0}, dims).ok());
+  EXPECT_FALSE(NearestAxes(Matrix{{{1, 1, 0}, {0, 0, 0}, {0, 0, 1}}}, {0, 0, 0}, dims).ok());
+  EXPECT_FALSE(NearestAxes(Matrix{{{NAN, 0, 0}, {0, 1, 0}, {0, 0, 1}}}, {0, 0, 0}, dims).ok());
+  // Columns whose largest entries share a row: the permutation is chosen as a whole.
+  absl::StatusOr<Orientation> o =
+      NearestAxes(Matrix{{{1, 0.9, 0}, {0.2, -0.6, 0}, {0, 0, 1}}}, {0, 0, 0}, dims);
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->source, (std::array<int, 3>{0, 1, 2}));
+  EXPECT_EQ(o->flip, (std::array<bool, 3>{false, true, false}));
+}
+
+}  // namespace
+}  // namespace isostream
