@@ -9,6 +9,7 @@
 
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -17,6 +18,7 @@
 
 #include "server/volume/grid_blocks.h"
 #include "server/volume/loaders.h"
+#include "server/volume/orientation.h"
 #include "server/volume/sample_reader.h"
 #include "server/volume/vdb_structure.h"
 
@@ -193,7 +195,8 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
   if (box.empty()) return absl::InvalidArgumentError(where + ": grid has no active voxels");
   ISOSTREAM_RETURN_IF_ERROR(CheckDims(BoxDims(box), limits, where));
 
-  // Samples sit on an axis-aligned lattice downstream, so only scale + translate maps load.
+  // Samples sit on an axis-aligned lattice downstream: scale + translate maps load, with axes
+  // reversed or swapped (turned onto the world's, orientation.h); rotated ones do not.
   const openvdb::math::Transform& transform = grid->transform();
   if (!transform.isLinear()) {
     return absl::InvalidArgumentError(where +
@@ -206,17 +209,28 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
   } catch (const std::exception& e) {
     return absl::InvalidArgumentError(where + ": degenerate transform (" + e.what() + ")");
   }
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) {
-      if ((r == c) != (m(r, c) != 0) || (r == c && !(m(r, c) > 0))) {
-        return absl::InvalidArgumentError(
-            where + ": only axis-aligned transforms with positive scale are supported");
-      }
-    }
+  // OpenVDB's matrices act on row vectors: index axis i steps by row i.
+  std::array<std::array<double, 3>, 3> steps;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) steps[c][r] = m(r, c);
+  const openvdb::Vec3d first = transform.indexToWorld(box.min());
+  const openvdb::Coord dim = box.dim();
+  absl::StatusOr<Orientation> orientation =
+      NearestAxes(steps, {first.x(), first.y(), first.z()}, {dim.x(), dim.y(), dim.z()});
+  if (!orientation.ok())
+    return absl::InvalidArgumentError(where + ": degenerate transform (" +
+                                      std::string(orientation.status().message()) + ")");
+  if (orientation->off_axis_degrees > 0) {
+    char angle[32];
+    std::snprintf(angle, sizeof(angle), "%.3g", orientation->off_axis_degrees);
+    return absl::InvalidArgumentError(where +
+                                      ": only axis-aligned transforms are supported (this one is "
+                                      "rotated " + angle + " degrees off the axes)");
   }
+  ISOSTREAM_RETURN_IF_ERROR(
+      CheckWorldBox(orientation->dims, orientation->spacing, orientation->origin, where));
 
   const BoxScan scan = ScanBox(*grid, box);
-  const openvdb::Coord dim = box.dim();
   if (scan.first_bad >= 0) {
     const int64_t plane = int64_t{dim.x()} * dim.y();
     const openvdb::Coord bad(static_cast<int>(scan.first_bad % dim.x()),
@@ -234,15 +248,14 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
   volume->grid = grid;
   volume->index_min = {box.min().x(), box.min().y(), box.min().z()};
   volume->dims = {dim.x(), dim.y(), dim.z()};
-  // The matrix's diagonal, as the origin below and the checks above use: a scale map also
-  // stores a voxel size of its own, which OpenVDB does not check against its scales.
-  volume->spacing = {m(0, 0), m(1, 1), m(2, 2)};
-  const openvdb::Vec3d origin = transform.indexToWorld(box.min());
-  volume->origin = {origin.x(), origin.y(), origin.z()};
-  ISOSTREAM_RETURN_IF_ERROR(CheckWorldBox(volume->dims, volume->spacing, volume->origin, where));
+  // From the matrix (the column lengths), as the checks above: a scale map also stores a voxel
+  // size of its own, which OpenVDB does not check against its scales.
+  for (int a = 0; a < 3; ++a) volume->spacing[orientation->source[a]] = orientation->spacing[a];
+  volume->origin = orientation->origin;
   volume->min_value = scan.min_value;
   volume->max_value = scan.max_value;
-  return VolumePtr(std::move(volume));
+  if (orientation->identity()) return VolumePtr(std::move(volume));
+  return Reorient(std::move(volume), *orientation);
 }
 
 }  // namespace isostream

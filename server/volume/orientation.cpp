@@ -107,6 +107,14 @@ VolumePtr Reorient(VolumePtr volume, const Orientation& o) {
 
   const openvdb::FloatGrid::Ptr& source = volume->grid;
   const float background = source->background();
+  // Tiles (OpenVDB files may hold them inside the box) become leaves first: only leaves move.
+  const std::array<int, 3>& lo = volume->index_min;
+  const std::array<int, 3>& n = volume->dims;
+  const auto leaf_start = [&](int a) { return lo[a] & ~(kDim - 1); };
+  for (int z = leaf_start(2); z < lo[2] + n[2]; z += kDim)
+    for (int y = leaf_start(1); y < lo[1] + n[1]; y += kDim)
+      for (int x = leaf_start(0); x < lo[0] + n[0]; x += kDim)
+        source->tree().touchLeaf(openvdb::Coord(x, y, z));
   std::vector<Leaf*> leaves;
   source->tree().stealNodes(leaves);
   tbb::parallel_for(size_t(0), leaves.size(), [&](size_t i) {
@@ -132,7 +140,8 @@ VolumePtr Reorient(VolumePtr volume, const Orientation& o) {
   turned->dims = o.dims;
   std::array<double, 3> index_zero;  // world position of grid index (0, 0, 0)
   for (int a = 0; a < 3; ++a) {
-    turned->index_min[a] = o.flip[a] ? -o.dims[a] : 0;
+    const int first = volume->index_min[o.source[a]];  // the source's first index on the axis
+    turned->index_min[a] = o.flip[a] ? -1 - (first + o.dims[a] - 1) : first;
     index_zero[a] = o.origin[a] - o.spacing[a] * turned->index_min[a];
   }
   turned->spacing = o.spacing;

@@ -150,5 +150,56 @@ TEST(VolumeOrientation, NearestAxesRefusesSingularAndNonFiniteMatrices) {
   EXPECT_EQ(o->flip, (std::array<bool, 3>{false, true, false}));
 }
 
+// An OpenVDB grid whose transform reverses and swaps axes loads turned onto the world's axes,
+// tiles and background gaps inside its box included; a rotated one is refused.
+TEST(VolumeOrientation, VdbReversedAndSwappedAxes) {
+  auto grid = openvdb::FloatGrid::create(-2.0f);
+  grid->setName("turned");
+  // Index x steps world -y by 0.5, y steps world +x by 2, z steps world -z by 1.5.
+  openvdb::Mat4d m = openvdb::Mat4d::identity();
+  m.setRow(0, openvdb::Vec4d(0, -0.5, 0, 0));
+  m.setRow(1, openvdb::Vec4d(2, 0, 0, 0));
+  m.setRow(2, openvdb::Vec4d(0, 0, -1.5, 0));
+  m.setRow(3, openvdb::Vec4d(7, 8, 9, 1));
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(m));
+  auto acc = grid->getAccessor();
+  for (int k = -3; k < 6; ++k)
+    for (int j = 5; j < 14; ++j)
+      for (int i = -11; i < 2; ++i) acc.setValue(openvdb::Coord(i, j, k), float(i * 100 + j * 10 + k));
+  grid->tree().fill(openvdb::CoordBBox(openvdb::Coord(-32, 16, -8), openvdb::Coord(-17, 31, 7)), 4.0f,
+                    true);  // a tile of 16^3 at (-32, 16, -8)
+  grid->tree().setValue(openvdb::Coord(5, 5, 5), 9.0f);  // the box reaches x = 5: background gap
+  const std::string path = WriteVdb("turned.vdb", {grid});
+  absl::StatusOr<VolumePtr> v = LoadVolume(path);
+  ASSERT_TRUE(v.ok()) << v.status();
+  const Volume& vol = **v;
+  EXPECT_EQ(vol.orientation, "file axes i j k on world -y +x -z");
+  const openvdb::CoordBBox box(openvdb::Coord(-32, 5, -8), openvdb::Coord(5, 31, 7));
+  EXPECT_EQ(vol.dims, (std::array<int, 3>{box.dim().y(), box.dim().x(), box.dim().z()}));
+  EXPECT_EQ(vol.spacing, (std::array<double, 3>{2, 0.5, 1.5}));
+  const openvdb::FloatGrid::ConstAccessor source = grid->getConstAccessor();
+  for (auto it = box.begin(); it; ++it) {
+    const openvdb::Vec3d w = grid->indexToWorld(*it);
+    int p[3];
+    for (int a = 0; a < 3; ++a) {
+      const double steps = (w[a] - vol.origin[a]) / vol.spacing[a];
+      p[a] = int(std::lround(steps));
+      ASSERT_NEAR(steps, p[a], 1e-9) << *it;
+      ASSERT_GE(p[a], 0);
+      ASSERT_LT(p[a], vol.dims[a]);
+    }
+    ASSERT_EQ(Sample(vol, p[0], p[1], p[2]), source.getValue(*it)) << *it;
+  }
+  EXPECT_EQ(vol.min_value, -1100 + 50 - 3);
+  EXPECT_EQ(vol.max_value, 100 + 130 + 5);
+
+  auto rotated = openvdb::FloatGrid::create(0.0f);
+  rotated->tree().setValue(openvdb::Coord(1, 2, 3), 1.0f);
+  rotated->tree().setValue(openvdb::Coord(2, 3, 4), 2.0f);
+  rotated->transform().preRotate(0.3, openvdb::math::Z_AXIS);
+  ExpectError(LoadVolume(WriteVdb("rotated_turned.vdb", {rotated})),
+              absl::StatusCode::kInvalidArgument, "rotated_turned.vdb", "rotated 17.2 degrees");
+}
+
 }  // namespace
 }  // namespace isostream
