@@ -117,16 +117,18 @@ VolumePtr Reorient(VolumePtr volume, const Orientation& o) {
         source->tree().touchLeaf(openvdb::Coord(x, y, z));
   std::vector<Leaf*> leaves;
   source->tree().stealNodes(leaves);
+  // Each leaf is turned in place: its values and active states permuted, its origin moved.
   tbb::parallel_for(size_t(0), leaves.size(), [&](size_t i) {
-    Leaf* in = leaves[i];
-    auto* out = new Leaf(target_origin(in->origin()), background, false);
-    const float* values = in->buffer().data();
-    for (openvdb::Index j = 0; j < Leaf::SIZE; ++j) {
-      out->setValueOnly(j, values[from[j]]);
-      if (in->isValueOn(from[j])) out->setValueOn(j);
+    Leaf* leaf = leaves[i];
+    float* values = leaf->buffer().data();
+    float before[Leaf::SIZE];
+    std::copy(values, values + Leaf::SIZE, before);
+    for (openvdb::Index j = 0; j < Leaf::SIZE; ++j) values[j] = before[from[j]];
+    if (!leaf->isValueMaskOn() && !leaf->isValueMaskOff()) {
+      const Leaf::NodeMaskType mask = leaf->getValueMask();
+      for (openvdb::Index j = 0; j < Leaf::SIZE; ++j) leaf->setActiveState(j, mask.isOn(from[j]));
     }
-    delete in;  // freed as it goes: the two grids together stay about one grid's size
-    leaves[i] = out;
+    leaf->setOrigin(target_origin(leaf->origin()));
   });
   openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
   grid->setName(source->getName());
