@@ -9,6 +9,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <memory>
 #include <string>
@@ -36,6 +37,55 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
   auto info = (*c)->GetVolumeInfo("ball");
   ASSERT_TRUE(info.ok()) << info.status();
   EXPECT_NE(DaemonLog(dir).find("prepared volume 'ball'"), std::string::npos);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
+// A NIfTI file stored with its axes turned (i on world -x, j on +z, k on +y) is served on the
+// world's axes: the volume's info says how, with dims, spacing and origin along world axes.
+TEST(NoPreloadDaemon, VolumeInfoOfATurnedNiftiFile) {
+  ScratchDir dir;
+  const std::string path = dir.path() + "/turned.nii";
+  {
+    std::vector<char> h(352, 0);
+    auto put = [&](int offset, auto value) { std::memcpy(&h[offset], &value, sizeof(value)); };
+    const int16_t dims[3] = {6, 5, 4};
+    put(0, int32_t{348});
+    put(40, int16_t{3});
+    for (int a = 0; a < 3; ++a) put(42 + 2 * a, dims[a]);
+    put(70, int16_t{16});  // float32
+    put(72, int16_t{32});
+    for (int a = 0; a < 4; ++a) put(76 + 4 * a, 1.0f);
+    put(108, 352.0f);
+    put(254, int16_t{1});  // sform_code
+    const float rows[3][4] = {{-2, 0, 0, 10}, {0, 0, 3, 20}, {0, 0.5f, 0, 30}};
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) put(280 + 16 * r + 4 * c, rows[r][c]);
+    std::memcpy(&h[344], "n+1", 4);
+    std::ofstream out(path, std::ios::binary);
+    out.write(h.data(), std::streamsize(h.size()));
+    for (int i = 0; i < 6 * 5 * 4; ++i) {
+      const float v = float(i % 7);
+      out.write(reinterpret_cast<const char*>(&v), sizeof(v));
+    }
+  }
+  DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--volume", "turned=" + path, "--no-preload", "--no-cache"},
+                           dir.path() + "/isostreamd.log"));
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  auto info = (*c)->GetVolumeInfo("turned");
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_EQ(info->orientation(), "file axes i j k on world -x +z +y");
+  EXPECT_EQ(std::vector<int>(info->dims().begin(), info->dims().end()),
+            (std::vector<int>{6, 4, 5}));
+  EXPECT_EQ(info->spacing().x(), 2);
+  EXPECT_EQ(info->spacing().y(), 3);
+  EXPECT_EQ(info->spacing().z(), 0.5);
+  EXPECT_EQ(info->origin().x(), 10 - 2 * 5);  // the file's last sample along i comes first
+  EXPECT_EQ(info->origin().y(), 20);
+  EXPECT_EQ(info->origin().z(), 30);
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
