@@ -23,7 +23,8 @@ namespace isostream::service {
 class VolumeHistograms {
  public:
   // Counts of the volume's samples in `bins` equal bins over [min_value, max_value] (bin i
-  // covers [min + i w, min + (i + 1) w), the last one closed), read from the hierarchy (which
+  // covers [min + i w, min + (i + 1) w), the last one closed; a constant volume's samples are
+  // all in the last), read from the hierarchy (which
   // holds the samples at its cube's origin corner). nullopt if `cancelled` returned true during
   // the pass; then nothing is kept.
   std::optional<std::vector<uint64_t>> Get(const Volume& v, const Hierarchy& h, int bins,
@@ -33,9 +34,13 @@ class VolumeHistograms {
     {
       std::lock_guard<std::mutex> lock(mu_);
       auto it = by_bins_.find(bins);
-      if (it != by_bins_.end()) return it->second;
+      if (it != by_bins_.end()) {
+        it->second.last_use = ++uses_;
+        return it->second.counts;
+      }
     }
     const double lo = v.min_value, width = double(v.max_value) - v.min_value;
+    const size_t last = size_t(bins) - 1;
     tbb::enumerable_thread_specific<std::vector<uint64_t>> local(size_t(bins), 0);
     std::atomic<bool> stopped{false};
     tbb::parallel_for(0, d[2], [&](int z) {
@@ -47,8 +52,12 @@ class VolumeHistograms {
       std::vector<uint64_t>& counts = local.local();
       for (int y = 0; y < d[1]; ++y)
         for (int x = 0; x < d[0]; ++x) {
-          const double t = width > 0 ? (h.sample(x, y, z) - lo) / width : 0.0;
-          ++counts[std::min(size_t(bins) - 1, size_t(std::max(0.0, t * bins)))];
+          // Multiplied before dividing: (s - lo) * bins is exact, and a correctly rounded
+          // quotient lands on a bin edge exactly where the sample does (29 / 100 * 100 gave
+          // 28.999...: integer data fell a bin short at every edge it met). A constant volume is
+          // all maximum: the last bin, the closed one.
+          const double t = width > 0 ? (h.sample(x, y, z) - lo) * bins / width : double(last);
+          ++counts[std::min(last, size_t(std::max(0.0, t)))];
         }
     });
     if (stopped) return std::nullopt;
@@ -56,15 +65,27 @@ class VolumeHistograms {
     for (const auto& part : local)
       for (size_t i = 0; i < counts.size(); ++i) counts[i] += part[i];
     std::lock_guard<std::mutex> lock(mu_);
-    if (by_bins_.size() >= kKept) by_bins_.clear();  // a client cycling bin counts stays bounded
-    by_bins_[bins] = counts;
+    if (by_bins_.size() >= kKept && by_bins_.count(bins) == 0) {
+      // The least recently used goes: clearing them all made a client cycling through nine
+      // bin counts pay a whole pass on every call.
+      auto oldest = by_bins_.begin();
+      for (auto it = by_bins_.begin(); it != by_bins_.end(); ++it)
+        if (it->second.last_use < oldest->second.last_use) oldest = it;
+      by_bins_.erase(oldest);
+    }
+    by_bins_[bins] = {counts, ++uses_};
     return counts;
   }
 
  private:
+  struct Kept {
+    std::vector<uint64_t> counts;
+    uint64_t last_use = 0;
+  };
   static constexpr size_t kKept = 8;  // bin counts kept per volume (at most 4096 x 8 B each)
   mutable std::mutex mu_;
-  mutable std::map<int, std::vector<uint64_t>> by_bins_;
+  mutable std::map<int, Kept> by_bins_;
+  mutable uint64_t uses_ = 0;
 };
 
 }  // namespace isostream::service

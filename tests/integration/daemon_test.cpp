@@ -51,8 +51,8 @@ TEST_F(Daemon, HealthServingAndCatalogue) {
   for (int z = 0; z < 65; ++z)
     for (int y = 0; y < 65; ++y)
       for (int x = 0; x < 65; ++x) {
-        const double t = (local.hierarchy->sample(x, y, z) - lo) / width;
-        ++direct[std::min<size_t>(15, size_t(std::max(0.0, t * 16)))];
+        const double t = (local.hierarchy->sample(x, y, z) - lo) * 16 / width;
+        ++direct[std::min<size_t>(15, size_t(std::max(0.0, t)))];
       }
   for (int round = 0; round < 2; ++round) {
     auto again = round == 0 ? info : c->GetVolumeInfo("buckyball:65", 16);
