@@ -60,13 +60,28 @@ class HeaderView {
   bool swap_;
 };
 
+// The steps of the file's axes from pixdim (their sign belongs to the orientation). A pixdim of
+// 0 is "not set" (some writers leave it so): unit spacing, as other NIfTI readers take it. One
+// that is not a number, or infinite, is a damaged header: refused rather than guessed, where
+// it is used (a usable sform does not use it).
+absl::StatusOr<std::array<double, 3>> PixdimSteps(const HeaderView& h, const std::string& path) {
+  std::array<double, 3> steps;
+  for (int i = 0; i < 3; ++i) {
+    const double p = std::fabs(h.F32(kPixdimOffset + 4 * (i + 1)));
+    if (!std::isfinite(p))
+      return absl::InvalidArgumentError(path + ": pixdim[" + std::to_string(i + 1) +
+                                        "] (the voxel spacing) is not a finite number");
+    steps[i] = p > 0 ? p : 1.0;
+  }
+  return steps;
+}
+
 // Where the samples lie in the world (nifti1.h, "3D image orientation and location"): the
 // sform's matrix if it is set and usable, else the qform's rotation and offset with the pixdim
 // steps (pixdim[0] < 0 reverses the third axis), else the steps alone ("method 1", ANALYZE).
-// A non-finite offset is taken as 0.
-absl::StatusOr<Orientation> FileOrientation(const HeaderView& h,
-                                            const std::array<double, 3>& steps,
-                                            const std::array<int, 3>& dims,
+// A damaged sform matrix or qform quaternion (not finite, singular) falls through to the next
+// (some writers fill in only the sform's offsets); a non-finite offset is taken as 0.
+absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::array<int, 3>& dims,
                                             const std::string& path) {
   std::array<std::array<double, 3>, 3> m{};
   std::array<double, 3> offset{0, 0, 0};
@@ -82,14 +97,11 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h,
     finite_offset();
     absl::StatusOr<Orientation> o = NearestAxes(m, offset, dims);
     if (o.ok()) return o;
-    // An unusable sform matrix (some writers fill in only its offsets) falls back to the qform,
-    // else to the steps alone with the sform's offset.
     m = {};
   }
-  if (h.I16(kQformCodeOffset) > 0) {
-    double b = h.F32(kQuaternOffset), c = h.F32(kQuaternOffset + 4), d = h.F32(kQuaternOffset + 8);
-    if (!std::isfinite(b) || !std::isfinite(c) || !std::isfinite(d))
-      return absl::InvalidArgumentError(path + ": qform quaternion is not finite");
+  ISOSTREAM_ASSIGN_OR_RETURN(const auto steps, PixdimSteps(h, path));
+  double b = h.F32(kQuaternOffset), c = h.F32(kQuaternOffset + 4), d = h.F32(kQuaternOffset + 8);
+  if (h.I16(kQformCodeOffset) > 0 && std::isfinite(b) && std::isfinite(c) && std::isfinite(d)) {
     double a2 = 1 - (b * b + c * c + d * d);
     if (a2 < 1e-7) {  // a 180-degree turn, rounded past the unit sphere: normalise (b, c, d)
       const double norm = std::sqrt(b * b + c * c + d * d);
@@ -102,15 +114,21 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h,
         {2 * (b * c + a * d), a * a + c * c - b * b - d * d, 2 * (c * d - a * b)},
         {2 * (b * d - a * c), 2 * (c * d + a * b), a * a + d * d - c * c - b * b}};
     const double qfac = h.F32(kPixdimOffset) < 0 ? -1 : 1;
+    std::array<std::array<double, 3>, 3> q;
     for (int r = 0; r < 3; ++r)
-      for (int i = 0; i < 3; ++i) m[r][i] = rotation[r][i] * steps[i] * (i == 2 ? qfac : 1);
-    for (int r = 0; r < 3; ++r) offset[r] = h.F32(kQoffsetOffset + 4 * r);
-    finite_offset();
-  } else {
-    for (int i = 0; i < 3; ++i) m[i][i] = steps[i];
+      for (int i = 0; i < 3; ++i) q[r][i] = rotation[r][i] * steps[i] * (i == 2 ? qfac : 1);
+    std::array<double, 3> q_offset;
+    for (int r = 0; r < 3; ++r) {
+      q_offset[r] = h.F32(kQoffsetOffset + 4 * r);
+      if (!std::isfinite(q_offset[r])) q_offset[r] = 0;
+    }
+    absl::StatusOr<Orientation> o = NearestAxes(q, q_offset, dims);
+    if (o.ok()) return o;
   }
+  for (int i = 0; i < 3; ++i) m[i][i] = steps[i];
   absl::StatusOr<Orientation> o = NearestAxes(m, offset, dims);
-  if (!o.ok()) return absl::InvalidArgumentError(path + ": qform: " + std::string(o.status().message()));
+  if (!o.ok())  // unreachable: positive finite steps on the diagonal
+    return absl::InvalidArgumentError(path + ": " + std::string(o.status().message()));
   return o;
 }
 
@@ -184,19 +202,8 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
     layout.inter = std::isfinite(inter) ? inter : 0.0;
   }
 
-  // Steps from pixdim (sign belongs to the orientation, not the step). A pixdim of 0 is
-  // "not set" (some writers leave it so): unit spacing, as other NIfTI readers take it. One that
-  // is not a number, or infinite, is a damaged header: refused rather than guessed.
-  std::array<double, 3> spacing;  // of the file's axes
-  for (int i = 0; i < 3; ++i) {
-    const double p = std::fabs(h.F32(kPixdimOffset + 4 * (i + 1)));
-    if (!std::isfinite(p))
-      return absl::InvalidArgumentError(path + ": pixdim[" + std::to_string(i + 1) +
-                                        "] (the voxel spacing) is not a finite number");
-    spacing[i] = p > 0 ? p : 1.0;
-  }
   ISOSTREAM_ASSIGN_OR_RETURN(const Orientation orientation,
-                             FileOrientation(h, spacing, layout.dims, path));
+                             FileOrientation(h, layout.dims, path));
   // The samples are read as stored, with the file's axes' steps, then turned onto the world's.
   std::array<double, 3> file_spacing;
   for (int a = 0; a < 3; ++a) file_spacing[orientation.source[a]] = orientation.spacing[a];

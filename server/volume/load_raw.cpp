@@ -32,6 +32,7 @@ absl::StatusOr<VolumePtr> LoadRawFile(const VolumeSpec& spec, const std::atomic<
                                       std::to_string(expected));
   }
   std::string grid_name = path.substr(path.find_last_of('/') + 1);
+  ISOSTREAM_RETURN_IF_ERROR(CheckWorldBox(spec.dims, {1, 1, 1}, {0, 0, 0}, path));
   ISOSTREAM_ASSIGN_OR_RETURN(VolumePtr volume, ReadSamples(input, layout, spec.text, grid_name,
                                                            {1, 1, 1}, {0, 0, 0}, stop));
   // A compressed file's size is known only once read: the same refusal, after the fact.

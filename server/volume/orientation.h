@@ -38,8 +38,8 @@ absl::StatusOr<Orientation> NearestAxes(const std::array<std::array<double, 3>, 
 
 // The volume with its grid rebuilt along the world's axes (o from NearestAxes for its dims):
 // each OpenVDB leaf stays one leaf, since a reversed index i becomes -1 - i, so a leaf's 8^3
-// block maps onto another whole leaf, and each leaf is turned in place (no second grid).
-// `volume` (any index_min) must not be shared.
+// block maps onto another whole leaf (and a tile's cube onto an aligned cube), and each leaf is
+// turned in place: the grid itself is turned. `volume` (any index_min) must not be shared.
 VolumePtr Reorient(VolumePtr volume, const Orientation& o);
 
 }  // namespace isostream

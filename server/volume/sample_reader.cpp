@@ -282,7 +282,6 @@ absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout
     if (disk_size - start < expected) return truncated(std::max<int64_t>(0, disk_size - start));
   }
 
-  ISOSTREAM_RETURN_IF_ERROR(CheckWorldBox(layout.dims, spacing, origin, input.path()));
   DenseGridBuilder builder(layout.dims);
   std::vector<unsigned char> raw(builder.SlabSamples(0) * bytes_per_sample);
   std::vector<float> slab(builder.SlabSamples(0));

@@ -81,7 +81,8 @@ struct SampleLayout {
 // Reads the samples of LAYOUT from INPUT (positioned at the first sample) into a volume named
 // NAME, slab by slab so only the grid and one slab are in memory. DataLoss when the data ends
 // early, InvalidArgument naming the first NaN/Inf sample, Cancelled between slabs once `stop`
-// (may be null) is set. Messages start with INPUT's path.
+// (may be null) is set. Messages start with INPUT's path. The caller checks the world box
+// (CheckWorldBox) first: only it knows the world's axes (orientation.h).
 absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout, std::string name,
                                       const std::string& grid_name,
                                       const std::array<double, 3>& spacing,

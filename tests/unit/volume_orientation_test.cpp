@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "server/volume/orientation.h"
 #include "tests/unit/volume_files.h"
@@ -199,6 +200,83 @@ TEST(VolumeOrientation, VdbReversedAndSwappedAxes) {
   rotated->transform().preRotate(0.3, openvdb::math::Z_AXIS);
   ExpectError(LoadVolume(WriteVdb("rotated_turned.vdb", {rotated})),
               absl::StatusCode::kInvalidArgument, "rotated_turned.vdb", "rotated 17.2 degrees");
+}
+
+// Turning keeps a sparse grid sparse (tiles move as tiles, gaps stay gaps: making leaves of the
+// whole box took 785 MB for these two voxels), and works at the ends of the index range (a box
+// ending near INT_MAX overflowed the loop over its leaves and never ended).
+TEST(VolumeOrientation, VdbSparseAndAtTheEndsOfTheIndexRange) {
+  auto sparse = openvdb::FloatGrid::create(0.0f);
+  sparse->tree().setValue(openvdb::Coord(0, 0, 0), 1.0f);
+  sparse->tree().setValue(openvdb::Coord(511, 511, 511), 2.0f);
+  // An inactive 128^3 tile of another value than the background, inside the box.
+  sparse->tree().addTile(2, openvdb::Coord(128, 0, 256), 3.0f, false);
+  openvdb::Mat4d m = openvdb::Mat4d::identity();
+  m.setRow(0, openvdb::Vec4d(-1, 0, 0, 0));
+  sparse->setTransform(openvdb::math::Transform::createLinearTransform(m));
+  absl::StatusOr<VolumePtr> v = LoadVolume(WriteVdb("sparse_turned.vdb", {sparse}));
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->grid->tree().leafCount(), 2u);
+  EXPECT_EQ(Sample(**v, 511, 0, 0), 1.0f);   // world x = 0 is the last sample along x
+  EXPECT_EQ(Sample(**v, 0, 511, 511), 2.0f);
+  EXPECT_EQ(Sample(**v, 511 - 130, 5, 300), 3.0f);  // inside the tile, x reversed
+
+  const int top = std::numeric_limits<int>::max();
+  for (const int last : {top, top - 1}) {
+    SCOPED_TRACE(last);
+    auto edge = openvdb::FloatGrid::create(0.0f);
+    edge->tree().setValue(openvdb::Coord(last, 0, 0), 5.0f);
+    edge->tree().setValue(openvdb::Coord(last - 30, 1, 1), 6.0f);
+    edge->tree().addTile(1, openvdb::Coord((last - 20) & ~7, 0, 0), 7.0f, true);
+    openvdb::Mat4d e = openvdb::Mat4d::identity();
+    e.setRow(0, openvdb::Vec4d(-1, 0, 0, 0));
+    e.setRow(3, openvdb::Vec4d(double(top), 0, 0, 1));
+    edge->setTransform(openvdb::math::Transform::createLinearTransform(e));
+    v = LoadVolume(WriteVdb("edge_turned.vdb", {edge}));
+    ASSERT_TRUE(v.ok()) << v.status();
+    EXPECT_EQ((*v)->dims, (std::array<int, 3>{31, 8, 8}));  // the tile is 8 deep
+    EXPECT_EQ(Sample(**v, 0, 0, 0), 5.0f);
+    EXPECT_EQ(Sample(**v, 30, 1, 1), 6.0f);
+    EXPECT_EQ(Sample(**v, last - ((last - 20) & ~7), 0, 0), 7.0f);  // the tile's first voxel
+  }
+}
+
+// Damaged orientation fields fall through to the next source (sform, qform, pixdim), and a
+// pixdim is refused only where it is used.
+TEST(VolumeOrientation, DamagedFieldsFallThrough) {
+  NiftiFile nf;
+  nf.qform_code = 1;
+  nf.quatern = {NAN, 0, 0};
+  nf.pixdim = {2, 2, 2};
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "nan_quatern.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->spacing, (std::array<double, 3>{2, 2, 2}));
+
+  nf = NiftiFile();
+  nf.sform_code = 1;
+  nf.srow = std::array<std::array<float, 3>, 3>{{{0, 3, 0}, {4, 0, 0}, {0, 0, 5}}};
+  nf.pixdim = {NAN, 1, 1};  // unused: the sform gives the steps
+  v = WriteAndLoad(nf, "nan_pixdim_sform.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->spacing, (std::array<double, 3>{3, 4, 5}));
+  nf.sform_code = 0;  // now pixdim gives them
+  ExpectError(WriteAndLoad(nf, "nan_pixdim.nii"), absl::StatusCode::kInvalidArgument,
+              "nan_pixdim.nii", "pixdim[1]");
+}
+
+// The world box is checked on the world's axes: a swapped file far from the origin whose world
+// x steps by 1 loads (the box was once checked again with the file's axes' steps, naming an x
+// spacing of 0.05 no world axis has).
+TEST(VolumeOrientation, WorldBoxCheckedOnTheWorldAxes) {
+  NiftiFile nf;
+  nf.dims = {20, 20, 4};
+  nf.sform_code = 1;
+  nf.srow = std::array<std::array<float, 3>, 3>{{{0, 1, 0}, {0.05f, 0, 0}, {0, 0, 1}}};
+  nf.sform_offset = {1e5f, 0, 0};
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "swap_far.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->origin[0], 1e5);
+  EXPECT_NEAR((*v)->spacing[1], 0.05, 1e-8);
 }
 
 }  // namespace
