@@ -14,16 +14,15 @@ bool Finite(const glm::vec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
-// An up vector usable with `forward`: the caller's if it is not (nearly) parallel, otherwise
-// the world axis least aligned with forward, so framing never produces a degenerate basis.
+}  // namespace
+
 glm::vec3 UsableUp(const glm::vec3& forward, const glm::vec3& up) {
-  if (glm::length(glm::cross(forward, up)) > 1e-3f * glm::length(up)) return up;
+  const float scale = glm::length(forward) * glm::length(up);
+  if (glm::length(glm::cross(forward, up)) > 1e-3f * scale) return up;
   const glm::vec3 a = glm::abs(forward);
   if (a.x <= a.y && a.x <= a.z) return {1, 0, 0};
   return a.y <= a.z ? glm::vec3(0, 1, 0) : glm::vec3(0, 0, 1);
 }
-
-}  // namespace
 
 glm::vec3 Camera::Forward() const { return glm::normalize(target - eye); }
 glm::vec3 Camera::Right() const { return glm::normalize(glm::cross(Forward(), up)); }

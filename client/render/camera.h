@@ -44,6 +44,10 @@ void EncloseSphere(float distance, float radius, Camera* camera);
 // or a positive orthographic half height.
 bool IsValidCamera(const Camera& camera);
 
+// An up vector usable with `forward`: `up` if it is not (nearly) parallel, otherwise the world
+// axis least aligned with forward, so a view straight down or up never has a degenerate basis.
+glm::vec3 UsableUp(const glm::vec3& forward, const glm::vec3& up);
+
 // A camera looking at `center` from `direction` (from the target towards the eye; any length),
 // placed so that the sphere of `radius` about `center` fits the view in both axes for the
 // camera's aspect, projection and field of view, with a 5% margin. Near and far enclose the

@@ -275,6 +275,7 @@ int Run(const Args& args) {
     camera = base;
     camera.eye = eye;
     camera.target = center;
+    camera.up = render::UsableUp(center - eye, base.up);  // a view from straight above or below
     camera.fov_y_degrees = distance > radius
                                ? std::min(170.0f, 2.1f * glm::degrees(std::asin(radius / distance)))
                                : 90.0f;

@@ -111,6 +111,25 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   }
 }
 
+// Views from straight above and below the volume's centre (along the viewer's up vector) are
+// drawn: they were refused as "too far from the volume (or too close to it)".
+TEST(View, DrawsFromStraightAboveAndBelow) {
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
+  for (const char* eye : {"0,5,0", "0,-3,0"}) {
+    const std::string png = dir.path() + "/top.png";
+    const ViewRun run = View("--server " + daemon.address() +
+                             " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 --eye " + eye +
+                             " -o " + png);
+    ASSERT_EQ(run.code, 0) << eye << "\n" << run.output;
+    auto image = render::ReadPng(png);
+    ASSERT_TRUE(image.ok()) << image.status();
+    EXPECT_GT(Coverage(*image), 0.05) << eye;
+  }
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 // A frame whose vertices all decode to one point (the surface around a single bright voxel)
 // is drawn: its fitted camera had near and far equal in single precision, and the viewer
 // stopped with "camera has no valid projection" (exit 2) and no picture.
