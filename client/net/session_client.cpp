@@ -45,7 +45,8 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
                   : "; connected with TLS: check that the daemon serves TLS with a certificate "
                     "--tls-ca trusts");
     case absl::StatusCode::kUnauthenticated:
-      return "the server refused the token (" + m + "); pass --token";
+      return "the server refused the token (" + m + "); " +
+             (options.token.empty() ? "pass --token" : "check the value given to --token");
     case absl::StatusCode::kNotFound:
       return m;
     case absl::StatusCode::kDeadlineExceeded:

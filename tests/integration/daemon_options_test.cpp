@@ -32,8 +32,16 @@ class GuardedDaemon : public Daemon {
 
 TEST_F(GuardedDaemon, TokenIsRequired) {
   const auto view = MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2));
-  EXPECT_EQ(Connect()->Fetch(view).status().code(), absl::StatusCode::kUnauthenticated);
-  EXPECT_EQ(Connect("wrong")->Fetch(view).status().code(), absl::StatusCode::kUnauthenticated);
+  const absl::Status missing = Connect()->Fetch(view).status();
+  EXPECT_EQ(missing.code(), absl::StatusCode::kUnauthenticated);
+  net::ClientOptions without, with;
+  with.token = "wrong";
+  EXPECT_NE(net::ExplainCallError(missing, without).find("pass --token"), std::string::npos);
+  // A token given but wrong is not told to be passed (it was: "pass --token").
+  const absl::Status wrong = Connect("wrong")->Fetch(view).status();
+  EXPECT_EQ(wrong.code(), absl::StatusCode::kUnauthenticated);
+  EXPECT_NE(net::ExplainCallError(wrong, with).find("check the value given to --token"),
+            std::string::npos);
   EXPECT_EQ(Connect("wrong")->GetServerStats().status().code(), absl::StatusCode::kUnauthenticated);
   auto session = Connect("s3cre")->OpenSession();
   ASSERT_TRUE(session.ok());
