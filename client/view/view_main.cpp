@@ -30,6 +30,7 @@
 #include "client/view/view_request.h"
 #include "client/view/window_view.h"
 #include "shared/file_io.h"
+#include "shared/frame_notes.h"
 #include "shared/given_number.h"
 #include "shared/malloc_tuning.h"
 #include "shared/number_list.h"
@@ -245,14 +246,11 @@ int Run(const Args& args) {
     auto parsed = ParseNumbers(args.iso, "--iso");
     if (!parsed.ok()) return Fail(parsed.status());
     iso = *parsed;
-    for (const double v : iso)
-      if (!(v >= info->min_value() && v <= info->max_value()))
-        std::fprintf(stderr,
-                     "isostream-view: note: isovalue %s lies outside %s's values [%s, %s]: no "
-                     "surface for it\n",
-                     ShortestText(v).c_str(), args.volume.c_str(),
-                     ShortestText(info->min_value()).c_str(),
-                     ShortestText(info->max_value()).c_str());
+    for (const double v : iso) {
+      const std::string note =
+          IsovalueOutsideNote(v, info->min_value(), info->max_value(), args.volume);
+      if (!note.empty()) std::fprintf(stderr, "isostream-view: note: %s\n", note.c_str());
+    }
   }
   render::Camera base;
   base.aspect = float(width) / float(height);
@@ -359,6 +357,9 @@ int Run(const Args& args) {
         "%s: %lld triangles in %d chunks (%.1f KiB), eps %s, %d coarse frame(s) first, %.0f ms\n",
         path.c_str(), (long long)frame->mesh.triangle_count(), frame->chunks, frame->bytes / 1024.0,
         ShortestText(frame->stats.eps_used()).c_str(), coarse, ms);
+    const std::string note = FrameNote(int64_t(frame->mesh.triangle_count()), state.budget,
+                                       frame->stats.eps_used());
+    if (!note.empty() && i == 0) std::fprintf(stderr, "isostream-view: note: %s\n", note.c_str());
   }
   // Every frame asked for is written: how the stream ends now (a daemon stopping, say) changes
   // nothing the user asked for.

@@ -8,6 +8,7 @@
 #include "server/extract/extractor.h"
 #include "server/volume/quantization.h"
 #include "shared/file_io.h"
+#include "shared/frame_notes.h"
 #include "shared/glb_writer.h"
 #include "shared/number_list.h"
 #include "shared/ply_io.h"
@@ -75,13 +76,11 @@ int RunExtract(const ExtractArgs& args) {
     return 2;
   }
   request->threads = args.volume.threads;
-  for (const float iso : request->isovalues)
-    if (!(iso >= prepared->volume->min_value && iso <= prepared->volume->max_value))
-      std::fprintf(stderr,
-                   "isostream extract: note: isovalue %s lies outside the volume's "
-                   "values [%s, %s]: no surface for it\n",
-                   ShortestText(iso).c_str(), ShortestText(prepared->volume->min_value).c_str(),
-                   ShortestText(prepared->volume->max_value).c_str());
+  for (const float iso : request->isovalues) {
+    const std::string note = IsovalueOutsideNote(iso, prepared->volume->min_value,
+                                                 prepared->volume->max_value, args.volume.volume);
+    if (!note.empty()) std::cerr << "isostream extract: note: " << note << "\n";
+  }
   auto result = Extract(*prepared->hierarchy, prepared->grid_to_world, *request);
   if (!result.ok()) {
     std::cerr << "isostream extract: " << result.status().message() << "\n";
@@ -100,6 +99,9 @@ int RunExtract(const ExtractArgs& args) {
     return 1;
   }
   if (args.stats) PrintStats(*request, result->stats, *prepared);
+  const std::string note =
+      FrameNote(result->stats.triangles, request->budget, result->stats.eps_used);
+  if (!note.empty()) std::cerr << "isostream extract: note: " << note << "\n";
   std::fprintf(stderr, "wrote %s: %lld triangles %s (eps %s)\n", args.output.c_str(),
                (long long)result->stats.triangles,
                request->order == DrawOrder::kNone ? "unordered" : "in back-to-front order",

@@ -8,6 +8,7 @@
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
 #include "shared/file_io.h"
+#include "shared/frame_notes.h"
 #include "shared/number_list.h"
 #include "shared/ply_io.h"
 
@@ -88,18 +89,23 @@ int RunFetch(const FetchArgs& args) {
     return fail(std::string(client.status().message()),
                 client.status().code() == absl::StatusCode::kInvalidArgument ? 2 : 1);
 
-  // The default view (no --eye, no --view-dir) depends on the volume's bounds, which only the
-  // server knows; ask for them only then.
+  // The default view (no --eye, no --view-dir) depends on the volume's bounds, and the notes on
+  // isovalues on its values, which only the server knows.
+  auto info = (*client)->GetVolumeInfo(args.volume, 1);
+  if (!info.ok()) return fail(net::ExplainCallError(info.status(), options), 1);
   Volume bounds;
   if (args.view.eye_flag->count() == 0 && args.view.view_dir_flag->count() == 0) {
-    auto info = (*client)->GetVolumeInfo(args.volume, 1);
-    if (!info.ok()) return fail(net::ExplainCallError(info.status(), options), 1);
     for (int a = 0; a < 3 && a < info->dims_size(); ++a) bounds.dims[a] = info->dims(a);
     bounds.spacing = {info->spacing().x(), info->spacing().y(), info->spacing().z()};
     bounds.origin = {info->origin().x(), info->origin().y(), info->origin().z()};
   }
   auto request = MakeRequest(args.view, bounds);
   if (!request.ok()) return fail(std::string(request.status().message()), 2);
+  for (const float iso : request->isovalues) {
+    const std::string note =
+        IsovalueOutsideNote(iso, info->min_value(), info->max_value(), args.volume);
+    if (!note.empty()) std::cerr << "isostream fetch: note: " << note << "\n";
+  }
 
   auto frame = (*client)->Fetch(ToViewRequest(*request, args));
   if (!frame.ok()) return fail(net::ExplainCallError(frame.status(), options), 1);
@@ -116,6 +122,9 @@ int RunFetch(const FetchArgs& args) {
     std::printf("ms            extract %.1f  encode %.1f (summed over chunks)  frame %.1f\n",
                 s.extract_ms(), s.encode_ms(), s.frame_ms());
   }
+  const std::string note = FrameNote(int64_t(frame->mesh.triangle_count()), request->budget,
+                                     frame->stats.eps_used());
+  if (!note.empty()) std::cerr << "isostream fetch: note: " << note << "\n";
   std::fprintf(stderr, "wrote %s: %zu triangles %s (eps %s)\n", args.output.c_str(),
                frame->mesh.triangle_count(),
                args.view.order == "none" ? "unordered" : "in back-to-front order",

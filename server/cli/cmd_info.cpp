@@ -9,6 +9,7 @@
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
 #include "server/extract/extractor.h"
+#include "shared/frame_notes.h"
 #include "shared/given_number.h"
 #include "shared/number_list.h"
 
@@ -100,8 +101,13 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
               CacheOutcomeName(prepared->cache));
   if (!prepared->cache_note.empty())
     std::printf("cache         %s\n", prepared->cache_note.c_str());
-  if (!iso.empty()) return PrintCountsByEps(*prepared, counting, iso);
-  return 0;
+  if (iso.empty()) return 0;
+  for (const float value : counting.isovalues) {
+    const std::string note = IsovalueOutsideNote(value, prepared->volume->min_value,
+                                                 prepared->volume->max_value, args.volume);
+    if (!note.empty()) std::cerr << "isostream info: note: " << note << "\n";
+  }
+  return PrintCountsByEps(*prepared, counting, iso);
 }
 
 }  // namespace

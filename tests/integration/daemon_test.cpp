@@ -15,6 +15,7 @@
 #include "server/extract/extractor.h"
 #include "shared/frame_codec.h"
 #include "shared/ply_io.h"
+#include "tests/common/run_command.h"
 #include "tests/integration/daemon_fixture.h"
 
 // In the fixture's namespace: Daemon, MakeView, kIso, pb, the frame helpers and the process
@@ -249,6 +250,16 @@ TEST_F(Daemon, FetchCommandWritesTheFrame) {
                           daemon_->address() + " --volume /etc/passwd --iso 0.1 --eps 0.01 -o " +
                           out + " 2>/dev/null";
   EXPECT_NE(std::system(bad.c_str()), 0);
+
+  // What would surprise is explained, as extract does: an isovalue outside the values, a
+  // budget under the coarsest mesh.
+  const testing::CommandResult noted = testing::RunCommand(
+      std::string(ISOSTREAM_CLI_PATH) + " fetch --server " + daemon_->address() +
+      " --volume cayley:33 --iso 0,99 --budget 1 -o " + out);
+  EXPECT_EQ(noted.code, 0) << noted.output;
+  EXPECT_NE(noted.output.find("isovalue 99 lies outside cayley:33's values"), std::string::npos)
+      << noted.output;
+  EXPECT_NE(noted.output.find("over the budget of 1"), std::string::npos) << noted.output;
 }
 
 TEST_F(Daemon, StatusCodes) {

@@ -127,6 +127,12 @@ TEST(View, DrawsFromStraightAboveAndBelow) {
     ASSERT_TRUE(image.ok()) << image.status();
     EXPECT_GT(Coverage(*image), 0.05) << eye;
   }
+  // A budget under the coarsest mesh is said to be exceeded (it was drawn silently).
+  const ViewRun over = View("--server " + daemon.address() +
+                            " --volume cayley:33 --iso 0 --budget 1 --size 64x64 -o " + dir.path() +
+                            "/over.png");
+  EXPECT_EQ(over.code, 0) << over.output;
+  EXPECT_NE(over.output.find("over the budget of 1"), std::string::npos) << over.output;
   EXPECT_EQ(daemon.Stop(), 0);
 }
 

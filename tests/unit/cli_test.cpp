@@ -212,9 +212,31 @@ TEST(Cli, IsovaluesOutsideTheDataAreNamed) {
   const CliRun r = Cli("extract --volume sphere:17 --iso 0,5 --eps 0 --no-cache -o " +
                        TempPath("cli-outside.ply"));
   EXPECT_EQ(r.code, 0) << r.output;
-  EXPECT_NE(r.output.find("isovalue 5 lies outside the volume's values [0, 1.7"), std::string::npos)
+  EXPECT_NE(r.output.find("isovalue 5 lies outside sphere:17's values [0, 1.7"), std::string::npos)
       << r.output;
   EXPECT_EQ(r.output.find("isovalue 0 lies"), std::string::npos) << r.output;
+  const CliRun info = Cli("info --volume sphere:17 --iso 0,5 --no-cache");
+  EXPECT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("isovalue 5 lies outside sphere:17's values"), std::string::npos)
+      << info.output;
+}
+
+// Results that look wrong but are what was asked for are explained: a budget under the coarsest
+// mesh (written, silently over budget, as "found for the budget"), and an eps so large that the
+// coarse tetrahedra miss every surface (an empty mesh, silently).
+TEST(Cli, SurprisingFramesAreExplained) {
+  const CliRun over = Cli("extract --volume cayley:33 --iso 0 --budget 1 --no-cache -o " +
+                          TempPath("cli-over.ply"));
+  EXPECT_EQ(over.code, 0) << over.output;
+  EXPECT_NE(over.output.find("has 12 triangles, over the budget of 1"), std::string::npos)
+      << over.output;
+  const CliRun empty = Cli("extract --volume sphere:17 --iso 0.5 --eps 100 --no-cache -o " +
+                           TempPath("cli-empty.ply"));
+  EXPECT_EQ(empty.code, 0) << empty.output;
+  EXPECT_NE(empty.output.find("the mesh is empty at eps 100"), std::string::npos) << empty.output;
+  const CliRun fine = Cli("extract --volume sphere:17 --iso 0.5 --eps 0 --no-cache -o " +
+                          TempPath("cli-fine.ply"));
+  EXPECT_EQ(fine.output.find("note:"), std::string::npos) << fine.output;
 }
 
 // info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,

@@ -1,0 +1,27 @@
+#include "shared/frame_notes.h"
+
+#include "shared/number_list.h"
+
+namespace isostream {
+
+std::string IsovalueOutsideNote(double iso, double min_value, double max_value,
+                                const std::string& volume) {
+  if (iso >= min_value && iso <= max_value) return "";
+  return "isovalue " + ShortestText(iso) + " lies outside " + volume + "'s values [" +
+         ShortestText(min_value) + ", " + ShortestText(max_value) + "]: no surface for it";
+}
+
+std::string FrameNote(int64_t triangles, int64_t budget, double eps_used) {
+  // The budget search answers with the coarsest mesh when even that is over the budget.
+  if (budget > 0 && triangles > budget)
+    return "the coarsest mesh (eps " + ShortestText(eps_used) + ") has " +
+           std::to_string(triangles) + " triangles, over the budget of " + std::to_string(budget) +
+           ": no coarser mesh exists";
+  if (triangles == 0)
+    return "the mesh is empty at eps " + ShortestText(eps_used) +
+           ": where the isovalues lie within the volume's values, a smaller eps (data units) "
+           "refines the coarse tetrahedra that miss them";
+  return "";
+}
+
+}  // namespace isostream

@@ -1,0 +1,18 @@
+// Notes the CLI and the viewer print beside a frame whose result would otherwise surprise a
+// user: an isovalue outside the volume's values, a budget under the coarsest mesh, an empty
+// mesh. One wording for every tool; each returns "" when there is nothing to say.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace isostream {
+
+// "isovalue 5 lies outside VOLUME's values [0, 1]: no surface for it".
+std::string IsovalueOutsideNote(double iso, double min_value, double max_value,
+                                const std::string& volume);
+
+// For a frame of `triangles` at `eps_used`, asked for with `budget` (0: none).
+std::string FrameNote(int64_t triangles, int64_t budget, double eps_used);
+
+}  // namespace isostream
