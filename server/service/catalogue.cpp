@@ -122,9 +122,21 @@ absl::Status VolumeCatalogue::Check(const std::string& name, std::string* canoni
   if (name.empty()) return absl::InvalidArgumentError("no volume named");
   if (options_.volumes.empty())
     return CheckGeneratorSpec(name, options_.max_generator_dim, canonical);
-  if (!options_.volumes.count(name))
-    return absl::NotFoundError("unknown volume " + Quoted(name) +
-                               " (ListVolumes gives the catalogue)");
+  if (!options_.volumes.count(name)) {
+    // The names a client may ask for (ListVolumes gives them too): a user who typed the
+    // generator spec the catalogue entry was made from, or another case, sees what to ask for.
+    constexpr size_t kNamed = 10;
+    std::string known;
+    size_t named = 0;
+    for (const auto& [entry, spec] : options_.volumes) {
+      if (named == kNamed) break;
+      known += (named++ == 0 ? "" : ", ") + Quoted(entry);
+    }
+    if (options_.volumes.size() > kNamed)
+      known += " and " + std::to_string(options_.volumes.size() - kNamed) + " more";
+    return absl::NotFoundError("unknown volume " + Quoted(name) + "; the catalogue has " + known +
+                               " (ListVolumes lists them)");
+  }
   return absl::OkStatus();
 }
 

@@ -267,6 +267,13 @@ TEST(Catalogue, GeneratorNamesOnlyWithinTheLimit) {
   EXPECT_TRUE(named.Check("head").ok());
   EXPECT_EQ(named.Check("buckyball:65").code(), absl::StatusCode::kNotFound);
   EXPECT_EQ(named.Check("/data/head.nii.gz").code(), absl::StatusCode::kNotFound);
+  // An unknown name is answered with the names there are (at most ten of them).
+  EXPECT_NE(named.Check("Head").message().find("the catalogue has 'head'"), std::string::npos)
+      << named.Check("Head");
+  for (int i = 0; i < 12; ++i) o.volumes["v" + std::to_string(10 + i)] = "sphere:9";
+  const std::string many(VolumeCatalogue(o).Check("x").message());
+  EXPECT_NE(many.find("'head', 'v10', "), std::string::npos) << many;
+  EXPECT_NE(many.find("'v18' and 3 more"), std::string::npos) << many;
 }
 
 TEST(Catalogue, KeepsABoundedNumberOfGeneratorVolumes) {
