@@ -76,6 +76,17 @@ TEST_F(GuardedDaemon, FrameOverTriangleLimitIsResourceExhausted) {
   EXPECT_EQ(stats->frames_failed(), 1);  // the suite's only frame over the limit
 }
 
+// A budget over --max-triangles is taken as the limit, not refused: both are ceilings, and the
+// mesh may be far smaller than either.
+TEST_F(GuardedDaemon, BudgetOverTheTriangleLimitIsTheLimit) {
+  pb::ViewRequest view = MakeView("buckyball:65", 1, 0.002, glm::dvec3(2, 2, 2));
+  view.set_triangle_budget(1'000'000'000);
+  auto frame = Connect("s3cret")->Fetch(view);
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  EXPECT_GT(frame->mesh.triangle_count(), 50'000u);
+  EXPECT_LE(frame->mesh.triangle_count(), 100'000u);
+}
+
 // SIGHUP (a closing terminal) stops it as SIGTERM does (ConfiguredDaemon's shutdown test): its
 // default action ended the process, cutting frames in flight.
 TEST_F(GuardedDaemon, SighupFinishesTheFrameInFlightAndExitsZero) {
