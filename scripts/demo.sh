@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/install-deps.sh
-./scripts/build.sh
+BUILD_TARGETS="isostreamd isostream isostream-view" ./scripts/build.sh
 BUILD_DIR=${BUILD_DIR:-build}  # as build.sh
 VOLUME=${VOLUME:-buckyball:129}
 ISO=${ISO:-0.05,0.15,0.25}

@@ -35,9 +35,7 @@ struct SurfaceStyle {
 
 using Palette = std::array<SurfaceStyle, kMaxSurfaces>;
 
-// Gerstner's Fig. 5 for the first three surfaces (outer to inner: blue 0.3, red 0.5,
-// green 0.7), then thirteen more colours chosen to stay apart from those and each other, at
-// opacity 0.5.
+// kDefaultSurfaceRgba (shared/surface_palette.h).
 Palette DefaultPalette();
 
 // A headlight: fixed to the camera so that the lit side is always the one being looked at.

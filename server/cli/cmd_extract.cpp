@@ -12,6 +12,7 @@
 #include "shared/glb_writer.h"
 #include "shared/number_list.h"
 #include "shared/ply_io.h"
+#include "shared/surface_palette.h"
 
 namespace isostream::cli {
 namespace {
@@ -92,6 +93,10 @@ int RunExtract(const ExtractArgs& args) {
   QuantizationBox box;
   QuantizationFor(*prepared->volume, &box, &glb_options.codec.position_bits);
   glb_options.codec.position_box = box;
+  // Each surface in the viewer's default colour and opacity (COLOR_0), so the file opened in
+  // Blender or three.js tells the surfaces apart as the viewer does.
+  for (size_t i = 0; i < request->isovalues.size(); ++i)
+    glb_options.surface_colors.push_back(kDefaultSurfaceRgba[i]);
   const absl::Status written =
       glb ? WriteGlb(result->mesh, args.output, glb_options) : WritePly(result->mesh, args.output);
   if (!written.ok()) {

@@ -86,6 +86,11 @@ TEST(Cli, GlbPositionsAreWithinAVoxelSixtyFourth) {
       worst = std::max(worst, std::abs(decoded->positions[3 * size_t(decoded->triangles[i]) + a] -
                                        exact->positions[3 * size_t(exact->triangles[i]) + a]));
   EXPECT_LE(worst, 1.01f / 64);  // the smallest voxel side is 1
+  // Surfaces carry the viewer's colours (COLOR_0), so a viewer elsewhere tells them apart: the
+  // file had one white material for all.
+  const size_t json_length = size_t(uint8_t((*bytes)[12])) | size_t(uint8_t((*bytes)[13])) << 8 |
+                             size_t(uint8_t((*bytes)[14])) << 16;
+  EXPECT_NE(bytes->substr(20, json_length).find("\"COLOR_0\""), std::string::npos);
 }
 
 TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {

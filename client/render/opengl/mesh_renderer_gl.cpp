@@ -22,6 +22,7 @@
 #include "client/render/opengl/embedded_shaders.h"
 #include "client/render/opengl/gl_api.h"
 #include "shared/mesh_validate.h"
+#include "shared/surface_palette.h"
 
 namespace isostream::render {
 namespace {
@@ -68,26 +69,10 @@ constexpr size_t kMaxChunkTriangles = size_t(std::numeric_limits<GLsizei>::max()
 
 Palette DefaultPalette() {
   Palette p;
-  p[0] = {{0.15f, 0.35f, 0.95f}, 0.3f};  // blue   (Gerstner Fig. 5, outermost)
-  p[1] = {{0.90f, 0.15f, 0.10f}, 0.5f};  // red
-  p[2] = {{0.10f, 0.75f, 0.20f}, 0.7f};  // green  (innermost of the three)
-  const glm::vec3 more[] = {
-      {0.95f, 0.80f, 0.10f},  // yellow
-      {0.80f, 0.20f, 0.75f},  // magenta
-      {0.10f, 0.75f, 0.85f},  // cyan
-      {1.00f, 0.50f, 0.05f},  // orange
-      {0.45f, 0.20f, 0.70f},  // purple
-      {0.00f, 0.50f, 0.50f},  // teal
-      {0.55f, 0.33f, 0.15f},  // brown
-      {1.00f, 0.60f, 0.70f},  // pink
-      {0.50f, 0.50f, 0.00f},  // olive
-      {0.10f, 0.10f, 0.45f},  // navy
-      {0.50f, 0.50f, 0.50f},  // grey
-      {0.60f, 0.95f, 0.20f},  // lime
-      {0.50f, 0.05f, 0.15f},  // maroon
-  };
-  static_assert(3 + std::size(more) == kMaxSurfaces);
-  for (size_t i = 0; i < std::size(more); ++i) p[3 + i] = {more[i], 0.5f};
+  for (size_t i = 0; i < p.size(); ++i) {
+    const std::array<float, 4>& c = kDefaultSurfaceRgba[i];
+    p[i] = {{c[0], c[1], c[2]}, c[3]};
+  }
   return p;
 }
 
