@@ -21,6 +21,7 @@
 #include <set>
 #include <sstream>
 
+#include "server/daemon/listen_failure.h"
 #include "server/service/config.h"
 #include "server/service/service.h"
 #include "shared/malloc_tuning.h"
@@ -111,11 +112,15 @@ int Run(const DaemonConfig& config) {
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || port == 0) {
-    spdlog::critical(
-        "cannot listen on {}: the port is in use, or the address is not this "
-        "machine's{}",
-        config.listen,
-        config.tls_cert.empty() ? "" : ", or the TLS certificate and key do not belong together");
+    const std::string reason = isostream::daemon::ListenFailureReason(config.listen);
+    if (!reason.empty()) {
+      spdlog::critical("cannot listen on {}: {}", config.listen, reason);
+    } else {
+      spdlog::critical(
+          "cannot listen on {}: the port is in use, or the address is not this machine's{}",
+          config.listen,
+          config.tls_cert.empty() ? "" : ", or the TLS certificate and key do not belong together");
+    }
     return 1;
   }
   // Health checks that name the service (as Kubernetes' gRPC probes may) see it too, not only

@@ -558,6 +558,14 @@ TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
             std::string::npos)
       << r.output;
   EXPECT_EQ(first.Stop(SIGTERM), 0);
+  // An address of no interface here (TEST-NET-1: binding it sends nothing) is told apart from
+  // a busy port: both were "the port is in use, or the address is not this machine's".
+  r = RunCommand(std::string("timeout 20 ") + ISOSTREAMD_PATH +
+                 " --no-cache --listen 192.0.2.1:0");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot listen on 192.0.2.1:0: the address is not this machine's"),
+            std::string::npos)
+      << r.output;
 
   const std::string junk = dir.path() + "/junk.pem";
   { std::ofstream(junk) << "not a certificate\n"; }
