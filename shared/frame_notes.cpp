@@ -11,16 +11,18 @@ std::string IsovalueOutsideNote(double iso, double min_value, double max_value,
          ShortestText(min_value) + ", " + ShortestText(max_value) + "]: no surface for it";
 }
 
-std::string FrameNote(int64_t triangles, int64_t budget, double eps_used) {
+std::string FrameNote(int64_t triangles, int64_t budget, double eps_used,
+                      bool some_isovalue_inside) {
   // The budget search answers with the coarsest mesh when even that is over the budget.
   if (budget > 0 && triangles > budget)
     return "the coarsest mesh (eps " + ShortestText(eps_used) + ") has " +
            std::to_string(triangles) + " triangles, over the budget of " + std::to_string(budget) +
            ": no coarser mesh exists";
-  if (triangles == 0)
+  // Only an eps above 0 can be lowered; a budget's search never stops at an empty mesh above 0
+  // (an empty mesh fits any budget, so it goes on to eps 0).
+  if (triangles == 0 && eps_used > 0 && some_isovalue_inside)
     return "the mesh is empty at eps " + ShortestText(eps_used) +
-           ": where the isovalues lie within the volume's values, a smaller eps (data units) "
-           "refines the coarse tetrahedra that miss them";
+           ": a smaller eps (data units) refines the coarse tetrahedra that miss the surfaces";
   return "";
 }
 

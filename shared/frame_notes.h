@@ -12,7 +12,10 @@ namespace isostream {
 std::string IsovalueOutsideNote(double iso, double min_value, double max_value,
                                 const std::string& volume);
 
-// For a frame of `triangles` at `eps_used`, asked for with `budget` (0: none).
-std::string FrameNote(int64_t triangles, int64_t budget, double eps_used);
+// For a frame of `triangles` at `eps_used`, asked for with `budget` (0: none), where
+// `some_isovalue_inside`: some isovalue lies within the volume's values (else the notes of
+// IsovalueOutsideNote have said why the mesh is empty).
+std::string FrameNote(int64_t triangles, int64_t budget, double eps_used,
+                      bool some_isovalue_inside);
 
 }  // namespace isostream

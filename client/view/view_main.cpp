@@ -236,6 +236,7 @@ int Run(const Args& args) {
   // In double: the float range of values near +-FLT_MAX overflows.
   const double min_value = info->min_value(), value_range = double(info->max_value()) - min_value;
   std::vector<double> iso;
+  bool some_inside = true;  // some isovalue within the values: the defaults are
   if (args.iso.empty() && value_range == 0) {
     std::fprintf(stderr, "isostream-view: %s holds the one value %s: it has no isosurface\n",
                  args.volume.c_str(), ShortestText(min_value).c_str());
@@ -246,10 +247,12 @@ int Run(const Args& args) {
     auto parsed = ParseNumbers(args.iso, "--iso");
     if (!parsed.ok()) return Fail(parsed.status());
     iso = *parsed;
+    some_inside = false;
     for (const double v : iso) {
       const std::string note =
           IsovalueOutsideNote(v, info->min_value(), info->max_value(), args.volume);
       if (!note.empty()) std::fprintf(stderr, "isostream-view: note: %s\n", note.c_str());
+      some_inside |= note.empty();
     }
   }
   render::Camera base;
@@ -358,7 +361,7 @@ int Run(const Args& args) {
         path.c_str(), (long long)frame->mesh.triangle_count(), frame->chunks, frame->bytes / 1024.0,
         ShortestText(frame->stats.eps_used()).c_str(), coarse, ms);
     const std::string note = FrameNote(int64_t(frame->mesh.triangle_count()), state.budget,
-                                       frame->stats.eps_used());
+                                       frame->stats.eps_used(), some_inside);
     if (!note.empty() && i == 0) std::fprintf(stderr, "isostream-view: note: %s\n", note.c_str());
   }
   // Every frame asked for is written: how the stream ends now (a daemon stopping, say) changes

@@ -31,7 +31,9 @@ void PrintStats(const ExtractRequest& r, const ExtractStats& s, const PreparedVo
     std::printf("  surface %zu   iso %-10g %lld triangles\n", i, r.isovalues[i],
                 (long long)s.triangles_per_surface[i]);
   std::printf("eps used      %s%s\n", ShortestText(s.eps_used).c_str(),
-              r.budget > 0 ? "  (found for the budget)" : "");
+              r.budget == 0                ? ""
+              : s.triangles <= r.budget ? "  (found for the budget)"
+                                          : "  (the coarsest mesh, over the budget)");
   std::printf("tets visited  %lld  (leaves with triangles %lld, subtrees %d)\n",
               (long long)s.tets_visited, (long long)s.leaves, s.subtrees);
   std::printf("ms            load %.1f  pad %.1f  hierarchy %.1f (cache %s)\n", p.load_s * 1e3,
@@ -77,10 +79,12 @@ int RunExtract(const ExtractArgs& args) {
     return 2;
   }
   request->threads = args.volume.threads;
+  bool some_inside = false;
   for (const float iso : request->isovalues) {
     const std::string note = IsovalueOutsideNote(iso, prepared->volume->min_value,
                                                  prepared->volume->max_value, args.volume.volume);
     if (!note.empty()) std::cerr << "isostream extract: note: " << note << "\n";
+    some_inside |= note.empty();
   }
   auto result = Extract(*prepared->hierarchy, prepared->grid_to_world, *request);
   if (!result.ok()) {
@@ -105,7 +109,7 @@ int RunExtract(const ExtractArgs& args) {
   }
   if (args.stats) PrintStats(*request, result->stats, *prepared);
   const std::string note =
-      FrameNote(result->stats.triangles, request->budget, result->stats.eps_used);
+      FrameNote(result->stats.triangles, request->budget, result->stats.eps_used, some_inside);
   if (!note.empty()) std::cerr << "isostream extract: note: " << note << "\n";
   std::fprintf(stderr, "wrote %s: %lld triangles %s (eps %s)\n", args.output.c_str(),
                (long long)result->stats.triangles,

@@ -101,10 +101,12 @@ int RunFetch(const FetchArgs& args) {
   }
   auto request = MakeRequest(args.view, bounds);
   if (!request.ok()) return fail(std::string(request.status().message()), 2);
+  bool some_inside = false;
   for (const float iso : request->isovalues) {
     const std::string note =
         IsovalueOutsideNote(iso, info->min_value(), info->max_value(), args.volume);
     if (!note.empty()) std::cerr << "isostream fetch: note: " << note << "\n";
+    some_inside |= note.empty();
   }
 
   auto frame = (*client)->Fetch(ToViewRequest(*request, args));
@@ -123,7 +125,7 @@ int RunFetch(const FetchArgs& args) {
                 s.extract_ms(), s.encode_ms(), s.frame_ms());
   }
   const std::string note = FrameNote(int64_t(frame->mesh.triangle_count()), request->budget,
-                                     frame->stats.eps_used());
+                                     frame->stats.eps_used(), some_inside);
   if (!note.empty()) std::cerr << "isostream fetch: note: " << note << "\n";
   std::fprintf(stderr, "wrote %s: %zu triangles %s (eps %s)\n", args.output.c_str(),
                frame->mesh.triangle_count(),

@@ -24,9 +24,8 @@ class VolumeHistograms {
  public:
   // Counts of the volume's samples in `bins` equal bins over [min_value, max_value] (bin i
   // covers [min + i w, min + (i + 1) w), the last one closed; a constant volume's samples are
-  // all in the last), read from the hierarchy (which
-  // holds the samples at its cube's origin corner). nullopt if `cancelled` returned true during
-  // the pass; then nothing is kept.
+  // all in the last), read from the hierarchy (which holds the samples at its cube's origin
+  // corner). nullopt if `cancelled` returned true during the pass; then nothing is kept.
   std::optional<std::vector<uint64_t>> Get(const Volume& v, const Hierarchy& h, int bins,
                                           const std::function<bool()>& cancelled) const {
     const auto& d = h.data_dims();
@@ -52,9 +51,9 @@ class VolumeHistograms {
       std::vector<uint64_t>& counts = local.local();
       for (int y = 0; y < d[1]; ++y)
         for (int x = 0; x < d[0]; ++x) {
-          // Multiplied before dividing: (s - lo) * bins is exact, and a correctly rounded
-          // quotient lands on a bin edge exactly where the sample does (29 / 100 * 100 gave
-          // 28.999...: integer data fell a bin short at every edge it met). A constant volume is
+          // Multiplied before dividing: (s - lo) * bins is exact for data of one scale (integer
+          // data, say), and a correctly rounded quotient lands on a bin edge exactly where the
+          // sample does (29 / 100 * 100 gave 28.999...: a bin short at every edge met). A constant volume is
           // all maximum: the last bin, the closed one.
           const double t = width > 0 ? (h.sample(x, y, z) - lo) * bins / width : double(last);
           ++counts[std::min(last, size_t(std::max(0.0, t)))];

@@ -100,6 +100,10 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
     m = {};
   }
   ISOSTREAM_ASSIGN_OR_RETURN(const auto steps, PixdimSteps(h, path));
+  if (h.I16(kQformCodeOffset) > 0) {  // its offset stands even if its rotation is damaged
+    for (int r = 0; r < 3; ++r) offset[r] = h.F32(kQoffsetOffset + 4 * r);
+    finite_offset();
+  }
   double b = h.F32(kQuaternOffset), c = h.F32(kQuaternOffset + 4), d = h.F32(kQuaternOffset + 8);
   if (h.I16(kQformCodeOffset) > 0 && std::isfinite(b) && std::isfinite(c) && std::isfinite(d)) {
     double a2 = 1 - (b * b + c * c + d * d);
@@ -117,12 +121,7 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
     std::array<std::array<double, 3>, 3> q;
     for (int r = 0; r < 3; ++r)
       for (int i = 0; i < 3; ++i) q[r][i] = rotation[r][i] * steps[i] * (i == 2 ? qfac : 1);
-    std::array<double, 3> q_offset;
-    for (int r = 0; r < 3; ++r) {
-      q_offset[r] = h.F32(kQoffsetOffset + 4 * r);
-      if (!std::isfinite(q_offset[r])) q_offset[r] = 0;
-    }
-    absl::StatusOr<Orientation> o = NearestAxes(q, q_offset, dims);
+    absl::StatusOr<Orientation> o = NearestAxes(q, offset, dims);
     if (o.ok()) return o;
   }
   for (int i = 0; i < 3; ++i) m[i][i] = steps[i];

@@ -36,10 +36,12 @@ absl::StatusOr<Orientation> NearestAxes(const std::array<std::array<double, 3>, 
   std::array<double, 3> length{};
   for (int i = 0; i < 3; ++i) {
     for (int r = 0; r < 3; ++r)
-      if (!std::isfinite(m[r][i])) return absl::InvalidArgumentError("the voxel-to-world matrix is not finite");
+      if (!std::isfinite(m[r][i]))
+        return absl::InvalidArgumentError("the voxel-to-world matrix is not finite");
     length[i] = std::hypot(m[0][i], m[1][i], m[2][i]);
     if (!(length[i] > 0) || !std::isfinite(length[i]))
-      return absl::InvalidArgumentError("the voxel-to-world matrix has a zero or overflowing column");
+      return absl::InvalidArgumentError(
+          "the voxel-to-world matrix has a zero or overflowing column");
   }
   const double det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
                      m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +

@@ -1,8 +1,8 @@
 // Private to server/volume: turning a file's sample axes onto the world's. A volume is held on
-// an axis-aligned grid with positive spacing (GridToWorld), while a file (NIfTI's sform or qform)
-// may store its samples with axes reversed, swapped or rotated. The nearest signed permutation
-// of the axes is found from the file's voxel-to-world matrix, and the grid is rebuilt along the
-// world's axes, so a surface is never drawn mirrored.
+// an axis-aligned grid with positive spacing (GridToWorld), while a file may store its samples
+// with axes reversed, swapped or rotated (a NIfTI sform or qform, an OpenVDB transform). The
+// nearest signed permutation of the axes is found from the file's voxel-to-world matrix, and
+// the grid is turned in place onto the world's axes, so a surface is never drawn mirrored.
 #pragma once
 
 #include <array>

@@ -242,6 +242,20 @@ TEST(Cli, SurprisingFramesAreExplained) {
   const CliRun fine = Cli("extract --volume sphere:17 --iso 0.5 --eps 0 --no-cache -o " +
                           TempPath("cli-fine.ply"));
   EXPECT_EQ(fine.output.find("note:"), std::string::npos) << fine.output;
+  // No advice to lower an eps of 0, nor for isovalues the volume never reaches (their own note
+  // says why), nor for a budget's search (it never stops at an empty mesh above eps 0).
+  for (const std::string& args : {std::string("--iso 0.5 --eps 0"), std::string("--iso 5 --eps 9"),
+                                  std::string("--iso 5 --budget 1000")}) {
+    const CliRun r = Cli("extract --volume sphere:17 --no-cache " + args + " -o " +
+                         TempPath("cli-none.ply"));
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(r.output.find("the mesh is empty"), std::string::npos) << args << "\n" << r.output;
+  }
+  const CliRun stats = Cli("extract --volume cayley:33 --iso 0 --budget 1 --stats --no-cache -o " +
+                           TempPath("cli-over.ply"));
+  EXPECT_NE(stats.output.find("(the coarsest mesh, over the budget)"), std::string::npos)
+      << stats.output;
+  EXPECT_EQ(stats.output.find("found for the budget"), std::string::npos) << stats.output;
 }
 
 // info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,

@@ -83,7 +83,8 @@ TEST(VolumeOrientation, QformQuarterTurnAndQfac) {
   // R = [[0,-1,0],[1,0,0],[0,0,1]]; columns scaled by 2, 3, -4.
   const Matrix m{{{0, -3, 0}, {2, 0, 0}, {0, 0, -4}}};
   EXPECT_EQ(vol.dims, (std::array<int, 3>{3, 10, 17}));
-  for (int a = 0; a < 3; ++a) EXPECT_NEAR(vol.spacing[a], (std::array<double, 3>{3, 2, 4})[a], 1e-6);
+  const std::array<double, 3> spacing{3, 2, 4};
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(vol.spacing[a], spacing[a], 1e-6);
   EXPECT_EQ(vol.orientation, "file axes i j k on world +y -x -z");
   // The quaternion's float rounding leaves entries of ~1e-7 off the axes.
   ExpectPlaced(vol, nf.dims, m, {-5, 6, 7}, 1e-5);
@@ -166,9 +167,11 @@ TEST(VolumeOrientation, VdbReversedAndSwappedAxes) {
   auto acc = grid->getAccessor();
   for (int k = -3; k < 6; ++k)
     for (int j = 5; j < 14; ++j)
-      for (int i = -11; i < 2; ++i) acc.setValue(openvdb::Coord(i, j, k), float(i * 100 + j * 10 + k));
-  grid->tree().fill(openvdb::CoordBBox(openvdb::Coord(-32, 16, -8), openvdb::Coord(-17, 31, 7)), 4.0f,
-                    true);  // a tile of 16^3 at (-32, 16, -8)
+      for (int i = -11; i < 2; ++i)
+        acc.setValue(openvdb::Coord(i, j, k), float(i * 100 + j * 10 + k));
+  // Tiles of 8^3 filling 16^3 at (-32, 16, -8).
+  grid->tree().fill(
+      openvdb::CoordBBox(openvdb::Coord(-32, 16, -8), openvdb::Coord(-17, 31, 7)), 4.0f, true);
   grid->tree().setValue(openvdb::Coord(5, 5, 5), 9.0f);  // the box reaches x = 5: background gap
   const std::string path = WriteVdb("turned.vdb", {grid});
   absl::StatusOr<VolumePtr> v = LoadVolume(path);
@@ -248,9 +251,11 @@ TEST(VolumeOrientation, DamagedFieldsFallThrough) {
   nf.qform_code = 1;
   nf.quatern = {NAN, 0, 0};
   nf.pixdim = {2, 2, 2};
+  nf.qoffset = {100, 200, 300};
   absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "nan_quatern.nii");
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->spacing, (std::array<double, 3>{2, 2, 2}));
+  EXPECT_EQ((*v)->origin, (std::array<double, 3>{100, 200, 300}));  // the qform's offset stands
 
   nf = NiftiFile();
   nf.sform_code = 1;
