@@ -289,9 +289,12 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
     if (cancel->load()) return;
     if (int64_t(end) > settings_.max_triangles) {
       std::lock_guard<std::mutex> lock(state.mu);
+      // With a budget, only the coarsest mesh can be over the limit: nothing coarser exists.
       stop(absl::ResourceExhaustedError(
           "the frame has more than " + std::to_string(settings_.max_triangles) +
-          " triangles (this daemon's limit): raise eps or give a triangle budget"));
+          " triangles (this daemon's limit): " +
+          (request.budget > 0 ? "even the coarsest mesh of these isovalues is over it"
+                              : "raise eps or give a triangle budget")));
       return;
     }
     // Never waits for the client here: on_ready runs under the extractor's lock, which every

@@ -544,6 +544,25 @@ TEST(DaemonStart, KeepsServingThroughAnIgnoredSighup) {
   EXPECT_EQ(daemon.Stop(SIGTERM), 0);
 }
 
+// A budget whose coarsest mesh is over --max-triangles is told that nothing coarser exists,
+// not to "give a triangle budget" it gave.
+TEST(DaemonStart, CoarsestMeshOverTheLimitIsExplained) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache", "--max-triangles", "10"}, dir.path() + "/d.log"));
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  pb::ViewRequest view = MakeView("cayley:33", 1, 0.01, glm::dvec3(2, 2, 2));
+  view.mutable_surfaces(0)->set_isovalue(0);
+  view.set_triangle_budget(5);  // the coarsest mesh has 12
+  const absl::Status s = (*c)->Fetch(view).status();
+  EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted) << s;
+  EXPECT_NE(s.message().find("even the coarsest mesh"), std::string::npos) << s;
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 // A daemon that cannot serve as asked stops at start, exit 1, saying why: a port another
 // daemon holds (gRPC's default SO_REUSEPORT would have let both listen and split the
 // clients between them), and TLS files that hold no PEM (gRPC blames the port for those).
