@@ -22,6 +22,14 @@
 namespace isostream::testing {
 namespace {
 
+std::unique_ptr<net::Client> ConnectTo(const DaemonProcess& daemon) {
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  EXPECT_TRUE(c.ok()) << c.status();
+  return c.ok() ? std::move(*c) : nullptr;
+}
+
 // --no-preload: a catalogue volume is prepared by its first request, not before.
 TEST(NoPreloadDaemon, PreparesOnFirstUse) {
   ScratchDir dir;
@@ -30,11 +38,7 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
                            dir.path() + "/isostreamd.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   EXPECT_EQ(DaemonLog(dir).find("prepared volume 'ball'"), std::string::npos) << DaemonLog(dir);
-  net::ClientOptions o;
-  o.address = daemon.address();
-  auto c = net::Client::Connect(o);
-  ASSERT_TRUE(c.ok());
-  auto info = (*c)->GetVolumeInfo("ball");
+  auto info = ConnectTo(daemon)->GetVolumeInfo("ball");
   ASSERT_TRUE(info.ok()) << info.status();
   EXPECT_NE(DaemonLog(dir).find("prepared volume 'ball'"), std::string::npos);
   EXPECT_EQ(daemon.Stop(), 0);
@@ -71,11 +75,7 @@ TEST(NoPreloadDaemon, VolumeInfoOfATurnedNiftiFile) {
   DaemonProcess daemon;
   ASSERT_TRUE(daemon.Start({"--volume", "turned=" + path, "--no-preload", "--no-cache"},
                            dir.path() + "/isostreamd.log"));
-  net::ClientOptions o;
-  o.address = daemon.address();
-  auto c = net::Client::Connect(o);
-  ASSERT_TRUE(c.ok());
-  auto info = (*c)->GetVolumeInfo("turned");
+  auto info = ConnectTo(daemon)->GetVolumeInfo("turned");
   ASSERT_TRUE(info.ok()) << info.status();
   EXPECT_EQ(info->orientation(), "file axes i j k on world -x +z +y");
   EXPECT_EQ(std::vector<int>(info->dims().begin(), info->dims().end()),

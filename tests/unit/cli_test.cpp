@@ -230,32 +230,27 @@ TEST(Cli, IsovaluesOutsideTheDataAreNamed) {
 // mesh (written, silently over budget, as "found for the budget"), and an eps so large that the
 // coarse tetrahedra miss every surface (an empty mesh, silently).
 TEST(Cli, SurprisingFramesAreExplained) {
-  const CliRun over = Cli("extract --volume cayley:33 --iso 0 --budget 1 --no-cache -o " +
-                          TempPath("cli-over.ply"));
-  EXPECT_EQ(over.code, 0) << over.output;
-  EXPECT_NE(over.output.find("has 12 triangles, over the budget of 1"), std::string::npos)
-      << over.output;
-  const CliRun empty = Cli("extract --volume sphere:17 --iso 0.5 --eps 100 --no-cache -o " +
-                           TempPath("cli-empty.ply"));
-  EXPECT_EQ(empty.code, 0) << empty.output;
-  EXPECT_NE(empty.output.find("the mesh is empty at eps 100"), std::string::npos) << empty.output;
-  const CliRun fine = Cli("extract --volume sphere:17 --iso 0.5 --eps 0 --no-cache -o " +
-                          TempPath("cli-fine.ply"));
-  EXPECT_EQ(fine.output.find("note:"), std::string::npos) << fine.output;
+  // What `extract --volume VOLUME ARGS` prints, after it succeeded.
+  auto extract = [](const std::string& volume, const std::string& args) {
+    const CliRun r = Cli("extract --volume " + volume + " --no-cache " + args + " -o " +
+                         TempPath("cli-noted.ply"));
+    EXPECT_EQ(r.code, 0) << args << "\n" << r.output;
+    return r.output;
+  };
+  const std::string over = extract("cayley:33", "--iso 0 --budget 1 --stats");
+  EXPECT_NE(over.find("has 12 triangles, over the budget of 1"), std::string::npos) << over;
+  EXPECT_NE(over.find("(the coarsest mesh, over the budget)"), std::string::npos) << over;
+  EXPECT_EQ(over.find("found for the budget"), std::string::npos) << over;
+  const std::string empty = extract("sphere:17", "--iso 0.5 --eps 100");
+  EXPECT_NE(empty.find("the mesh is empty at eps 100"), std::string::npos) << empty;
+  const std::string fine = extract("sphere:17", "--iso 0.5 --eps 0");
+  EXPECT_EQ(fine.find("note:"), std::string::npos) << fine;
   // No advice to lower an eps of 0, nor for isovalues the volume never reaches (their own note
   // says why), nor for a budget's search (it never stops at an empty mesh above eps 0).
-  for (const std::string& args : {std::string("--iso 0.5 --eps 0"), std::string("--iso 5 --eps 9"),
-                                  std::string("--iso 5 --budget 1000")}) {
-    const CliRun r = Cli("extract --volume sphere:17 --no-cache " + args + " -o " +
-                         TempPath("cli-none.ply"));
-    EXPECT_EQ(r.code, 0) << r.output;
-    EXPECT_EQ(r.output.find("the mesh is empty"), std::string::npos) << args << "\n" << r.output;
+  for (const char* args : {"--iso 0.5 --eps 0", "--iso 5 --eps 9", "--iso 5 --budget 1000"}) {
+    const std::string out = extract("sphere:17", args);
+    EXPECT_EQ(out.find("the mesh is empty"), std::string::npos) << args << "\n" << out;
   }
-  const CliRun stats = Cli("extract --volume cayley:33 --iso 0 --budget 1 --stats --no-cache -o " +
-                           TempPath("cli-over.ply"));
-  EXPECT_NE(stats.output.find("(the coarsest mesh, over the budget)"), std::string::npos)
-      << stats.output;
-  EXPECT_EQ(stats.output.find("found for the budget"), std::string::npos) << stats.output;
 }
 
 // info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,
