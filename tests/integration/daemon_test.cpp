@@ -310,9 +310,10 @@ TEST_F(Daemon, StatusCodes) {
   for (int i = 0; i < 2; ++i) many.add_surfaces()->set_isovalue(0.3f + 0.01f * i);
   EXPECT_EQ(code(many).code(), absl::StatusCode::kResourceExhausted);  // 5 > --max-isovalues 4
 
+  // A budget over --max-triangles 1000000 is that limit (GuardedDaemon tests one that binds).
   pb::ViewRequest big_budget = MakeView("buckyball:65", 1, 0.01, eye);
   big_budget.set_triangle_budget(2'000'000);
-  EXPECT_EQ(code(big_budget).code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_TRUE(code(big_budget).ok());
 
   // A bad request on a session ends that session with the status.
   auto session = c->OpenSession();
