@@ -53,8 +53,8 @@ class VolumeHistograms {
         for (int x = 0; x < d[0]; ++x) {
           // Multiplied before dividing: (s - lo) * bins is exact for data of one scale (integer
           // data, say), and a correctly rounded quotient lands on a bin edge exactly where the
-          // sample does (29 / 100 * 100 gave 28.999...: a bin short at every edge met). A constant volume is
-          // all maximum: the last bin, the closed one.
+          // sample does (29 / 100 * 100 gave 28.999...: a bin short at every edge met). A
+          // constant volume is all maximum: the last bin, the closed one.
           const double t = width > 0 ? (h.sample(x, y, z) - lo) * bins / width : double(last);
           ++counts[std::min(last, size_t(std::max(0.0, t)))];
         }
