@@ -164,7 +164,22 @@ absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
 }
 
 absl::Status ValidateConfig(const DaemonConfig& c) {
-  auto bad = [](const std::string& m) { return absl::InvalidArgumentError(m); };
+  // A key that is also a flag is named both ways: a user who typed --max-sessions 0 should not
+  // have to guess that max_sessions is it.
+  auto bad = [](const std::string& m) {
+    static const char* const kFlagKeys[] = {
+        "threads",    "max_sessions", "cache_max_mb",   "max_triangles", "max_isovalues",
+        "deadline_ms", "max_dim",     "generator_mb",   "idle_timeout_s", "chunk_triangles",
+        "retain_mb",  "log_level",    "listen"};
+    for (const char* key : kFlagKeys) {
+      const std::string k(key);
+      if (m.rfind(k + " must", 0) != 0) continue;
+      std::string flag = "--" + k;
+      std::replace(flag.begin(), flag.end(), '_', '-');
+      return absl::InvalidArgumentError(k + " (" + flag + ")" + m.substr(k.size()));
+    }
+    return absl::InvalidArgumentError(m);
+  };
   if (c.threads < 0 || c.threads > 1024) return bad("threads must be in 0..1024");
   // Each admissible session has a frame thread of its own, started with the daemon.
   if (c.limits.max_sessions < 1 || c.limits.max_sessions > 4096)

@@ -499,16 +499,17 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
       {"--volume b=raw:x.raw:4x4:float32", "volume 'b': "},
       {"--volume c=notes.txt", "volume 'c': notes.txt: unrecognised volume type"},
       {"--listen 127.0.0.1:70000", "port in 0..65535"},
-      {"--log-level shouty", "log_level must be one of"},
-      {"--deadline-ms 10000000000000", "deadline_ms must be in 1..86400000"},
+      {"--log-level shouty", "log_level (--log-level) must be one of"},
+      {"--deadline-ms 10000000000000", "deadline_ms (--deadline-ms) must be in 1..86400000"},
       // A first chunk that was set is checked, not cut down to the chunk size.
       {"--chunk-triangles 4096 --config " + first_chunk_config,
        "first_chunk_triangles must be in 256..chunk_triangles"},
       // The default's value too, when it was written (it was cut as if left out).
       {"--chunk-triangles 4096 --config " + default_first_chunk_config,
        "first_chunk_triangles must be in 256..chunk_triangles"},
-      {"--max-sessions 2000000000", "max_sessions must be in 1..4096"},
-      {"--generator-mb 0", "generator_mb must be in 1..1073741824"},
+      // Named as the flag too, not only as the config key.
+      {"--max-sessions 2000000000", "max_sessions (--max-sessions) must be in 1..4096"},
+      {"--generator-mb 0", "generator_mb (--generator-mb) must be in 1..1073741824"},
       {"--token ''", "--token is empty"},
       {"--token \"$(printf 'a\\tb')\"", "token must be printable ASCII"},
       {"--bogus", "--bogus"}};
