@@ -385,7 +385,8 @@ int main(int argc, char** argv) {
       ->check(isostream::GivenNumber());  // given but empty: an error, not the defaults
   const CLI::Validator given_number = isostream::GivenNumber();
   auto* eps = app.add_option("--eps", args.eps, "error bound in data units")->check(given_number);
-  auto* budget = app.add_option("--budget", args.budget, "triangle budget")->check(given_number);
+  auto* budget = app.add_option("--budget", args.budget, "triangle budget")
+                     ->transform(isostream::GivenCount());
   eps->excludes(budget);
   app.add_option("--eye", args.eye, "perspective eye x,y,z (default: framing the volume)");
   app.add_option("--size", args.size, "image size WxH (default 800x800)");

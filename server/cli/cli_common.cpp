@@ -69,7 +69,7 @@ void AddViewOptions(CLI::App* cmd, ViewArgs* args) {
                   ->check(given_number);
   auto* budget =
       cmd->add_option("--budget", args->budget, "triangle budget: find the smallest eps that fits")
-          ->check(given_number);
+          ->transform(GivenCount());
   eps->excludes(budget);
   auto* eye = cmd->add_option("--eye", args->eye, "perspective eye x,y,z (world units)");
   auto* dir = cmd->add_option("--view-dir", args->view_dir, "orthographic view direction x,y,z");

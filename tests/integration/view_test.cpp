@@ -65,7 +65,7 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/blocked_000.png"));
   const ViewRun orbit =
       View("--server " + daemon.address() +
-           " --volume sphere:33 --iso 0.3,0.6 --budget 5000 --orbit 3 --size 64x64 -o " +
+           " --volume sphere:33 --iso 0.3,0.6 --budget 5e3 --orbit 3 --size 64x64 -o " +
            dir.path() + "/orbit.png");
   ASSERT_EQ(orbit.code, 0) << orbit.output;
   for (const char* name : {"orbit_000.png", "orbit_001.png", "orbit_002.png"})

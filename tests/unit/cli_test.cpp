@@ -253,6 +253,18 @@ TEST(Cli, SurprisingFramesAreExplained) {
   }
 }
 
+// A count may be written with an exponent ("--budget 1e3"): it was refused as "Could not
+// convert". A fraction is still refused.
+TEST(Cli, BudgetsWithAnExponent) {
+  const std::string args = "extract --volume sphere:17 --iso 0.5 --no-cache -o " +
+                           TempPath("cli-exponent.ply") + " --budget ";
+  const CliRun plain = Cli(args + "1000");
+  const CliRun exponent = Cli(args + "1e3");
+  EXPECT_EQ(exponent.code, 0) << exponent.output;
+  EXPECT_EQ(exponent.output, plain.output);
+  EXPECT_NE(Cli(args + "1.5").code, 0);
+}
+
 // info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,
 // which is what extract --eps 0 writes.
 // What a command prints is its result: one that cannot be written is a failure (exit 1).
