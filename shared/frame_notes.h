@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <string>
 
 namespace isostream {
@@ -11,6 +12,20 @@ namespace isostream {
 // "isovalue 5 lies outside VOLUME's values [0, 1]: no surface for it".
 std::string IsovalueOutsideNote(double iso, double min_value, double max_value,
                                 const std::string& volume);
+
+// Prints "TOOL: note: ..." to stderr for each isovalue outside [min_value, max_value], and
+// returns whether some isovalue lies within (FrameNote's some_isovalue_inside).
+template <typename Isovalues>
+bool NoteIsovaluesOutside(const char* tool, const Isovalues& isovalues, double min_value,
+                          double max_value, const std::string& volume) {
+  bool some_inside = false;
+  for (const double iso : isovalues) {
+    const std::string note = IsovalueOutsideNote(iso, min_value, max_value, volume);
+    if (!note.empty()) std::fprintf(stderr, "%s: note: %s\n", tool, note.c_str());
+    some_inside |= note.empty();
+  }
+  return some_inside;
+}
 
 // For a frame of `triangles` at `eps_used`, asked for with `budget` (0: none), where
 // `some_isovalue_inside`: some isovalue lies within the volume's values (else the notes of

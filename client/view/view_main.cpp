@@ -247,13 +247,8 @@ int Run(const Args& args) {
     auto parsed = ParseNumbers(args.iso, "--iso");
     if (!parsed.ok()) return Fail(parsed.status());
     iso = *parsed;
-    some_inside = false;
-    for (const double v : iso) {
-      const std::string note =
-          IsovalueOutsideNote(v, info->min_value(), info->max_value(), args.volume);
-      if (!note.empty()) std::fprintf(stderr, "isostream-view: note: %s\n", note.c_str());
-      some_inside |= note.empty();
-    }
+    some_inside = NoteIsovaluesOutside("isostream-view", iso, info->min_value(),
+                                       info->max_value(), args.volume);
   }
   render::Camera base;
   base.aspect = float(width) / float(height);

@@ -79,13 +79,9 @@ int RunExtract(const ExtractArgs& args) {
     return 2;
   }
   request->threads = args.volume.threads;
-  bool some_inside = false;
-  for (const float iso : request->isovalues) {
-    const std::string note = IsovalueOutsideNote(iso, prepared->volume->min_value,
-                                                 prepared->volume->max_value, args.volume.volume);
-    if (!note.empty()) std::cerr << "isostream extract: note: " << note << "\n";
-    some_inside |= note.empty();
-  }
+  const bool some_inside =
+      NoteIsovaluesOutside("isostream extract", request->isovalues, prepared->volume->min_value,
+                           prepared->volume->max_value, args.volume.volume);
   auto result = Extract(*prepared->hierarchy, prepared->grid_to_world, *request);
   if (!result.ok()) {
     std::cerr << "isostream extract: " << result.status().message() << "\n";

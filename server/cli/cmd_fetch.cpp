@@ -101,13 +101,8 @@ int RunFetch(const FetchArgs& args) {
   }
   auto request = MakeRequest(args.view, bounds);
   if (!request.ok()) return fail(std::string(request.status().message()), 2);
-  bool some_inside = false;
-  for (const float iso : request->isovalues) {
-    const std::string note =
-        IsovalueOutsideNote(iso, info->min_value(), info->max_value(), args.volume);
-    if (!note.empty()) std::cerr << "isostream fetch: note: " << note << "\n";
-    some_inside |= note.empty();
-  }
+  const bool some_inside = NoteIsovaluesOutside("isostream fetch", request->isovalues,
+                                                 info->min_value(), info->max_value(), args.volume);
 
   auto frame = (*client)->Fetch(ToViewRequest(*request, args));
   if (!frame.ok()) return fail(net::ExplainCallError(frame.status(), options), 1);

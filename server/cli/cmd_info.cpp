@@ -102,11 +102,8 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
   if (!prepared->cache_note.empty())
     std::printf("cache         %s\n", prepared->cache_note.c_str());
   if (iso.empty()) return 0;
-  for (const float value : counting.isovalues) {
-    const std::string note = IsovalueOutsideNote(value, prepared->volume->min_value,
-                                                 prepared->volume->max_value, args.volume);
-    if (!note.empty()) std::cerr << "isostream info: note: " << note << "\n";
-  }
+  NoteIsovaluesOutside("isostream info", counting.isovalues, prepared->volume->min_value,
+                       prepared->volume->max_value, args.volume);
   return PrintCountsByEps(*prepared, counting, iso);
 }
 

@@ -164,40 +164,33 @@ absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
 }
 
 absl::Status ValidateConfig(const DaemonConfig& c) {
+  auto bad = [](const std::string& m) { return absl::InvalidArgumentError(m); };
   // A key that is also a flag is named both ways: a user who typed --max-sessions 0 should not
   // have to guess that max_sessions is it.
-  auto bad = [](const std::string& m) {
-    static const char* const kFlagKeys[] = {
-        "threads",    "max_sessions", "cache_max_mb",   "max_triangles", "max_isovalues",
-        "deadline_ms", "max_dim",     "generator_mb",   "idle_timeout_s", "chunk_triangles",
-        "retain_mb",  "log_level",    "listen"};
-    for (const char* key : kFlagKeys) {
-      const std::string k(key);
-      if (m.rfind(k + " must", 0) != 0) continue;
-      std::string flag = "--" + k;
-      std::replace(flag.begin(), flag.end(), '_', '-');
-      return absl::InvalidArgumentError(k + " (" + flag + ")" + m.substr(k.size()));
-    }
-    return absl::InvalidArgumentError(m);
+  auto key = [](std::string k) {
+    std::string flag = "--" + k;
+    std::replace(flag.begin(), flag.end(), '_', '-');
+    return k + " (" + flag + ")";
   };
-  if (c.threads < 0 || c.threads > 1024) return bad("threads must be in 0..1024");
+  if (c.threads < 0 || c.threads > 1024) return bad(key("threads") + " must be in 0..1024");
   // Each admissible session has a frame thread of its own, started with the daemon.
   if (c.limits.max_sessions < 1 || c.limits.max_sessions > 4096)
-    return bad("max_sessions must be in 1..4096");
+    return bad(key("max_sessions") + " must be in 1..4096");
   if (c.cache_max_mb < 1 || c.cache_max_mb > (int64_t{1} << 30))
-    return bad("cache_max_mb must be in 1..1073741824");
-  if (c.limits.max_triangles < 1) return bad("max_triangles must be at least 1");
+    return bad(key("cache_max_mb") + " must be in 1..1073741824");
+  if (c.limits.max_triangles < 1) return bad(key("max_triangles") + " must be at least 1");
   if (c.limits.max_isovalues < 1 || c.limits.max_isovalues > 16)
-    return bad("max_isovalues must be in 1..16");
+    return bad(key("max_isovalues") + " must be in 1..16");
   // A day at most: far past any frame, and clock arithmetic overflowed past ~292 years (every
   // frame then failed at once).
   if (c.limits.deadline_ms < 1 || c.limits.deadline_ms > 86'400'000)
-    return bad("deadline_ms must be in 1..86400000");
-  if (c.limits.max_dim < 2 || c.limits.max_dim > 4097) return bad("max_dim must be in 2..4097");
+    return bad(key("deadline_ms") + " must be in 1..86400000");
+  if (c.limits.max_dim < 2 || c.limits.max_dim > 4097)
+    return bad(key("max_dim") + " must be in 2..4097");
   if (c.limits.generator_mb < 1 || c.limits.generator_mb > (int64_t{1} << 30))
-    return bad("generator_mb must be in 1..1073741824");
+    return bad(key("generator_mb") + " must be in 1..1073741824");
   if (c.limits.idle_timeout_s < 0 || c.limits.idle_timeout_s > 7 * 86400)
-    return bad("idle_timeout_s must be in 0 (off)..604800");
+    return bad(key("idle_timeout_s") + " must be in 0 (off)..604800");
   if (c.tls_cert.empty() != c.tls_key.empty()) return bad("TLS needs both a certificate and a key");
   // A catalogue entry wrong as written (an unknown generator, a malformed raw layout, a file
   // type no loader reads) would fail on every request, retried every 30 s: refused at start.
@@ -215,7 +208,8 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   // bytes per triangle (no shared vertices, indices stored plainly); raw chunks are cut at
   // kMaxRawChunkTriangles regardless.
   if (c.chunk_triangles < 256 || c.chunk_triangles > int(kMaxStreamChunkTriangles))
-    return bad("chunk_triangles must be in 256.." + std::to_string(kMaxStreamChunkTriangles));
+    return bad(key("chunk_triangles") + " must be in 256.." +
+               std::to_string(kMaxStreamChunkTriangles));
   if (c.first_chunk_triangles &&
       (*c.first_chunk_triangles < 256 || *c.first_chunk_triangles > c.chunk_triangles))
     return bad("first_chunk_triangles must be in 256..chunk_triangles (" +
@@ -225,7 +219,7 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   if (c.max_queued_chunks < 2 || c.max_queued_chunks > 256)
     return bad("max_queued_chunks must be in 2..256");
   if (c.retain_mb < 0 || c.retain_mb > (int64_t{1} << 30))
-    return bad("retain_mb must be in 0 (off)..1073741824");
+    return bad(key("retain_mb") + " must be in 0 (off)..1073741824");
   for (const auto& [name, spec] : c.volumes)
     if (name.empty() || spec.empty()) return bad("catalogue names and specs must not be empty");
   if (c.shutdown_grace_ms < 0 || c.shutdown_grace_ms > 3'600'000)
@@ -233,10 +227,12 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   static const std::set<std::string> kLevels = {"trace", "debug",    "info", "warn",
                                                 "error", "critical", "off"};
   if (!kLevels.count(c.log_level))
-    return bad("log_level must be one of trace, debug, info, warn, error, critical, off; got '" +
+    return bad(key("log_level") +
+               " must be one of trace, debug, info, warn, error, critical, off; got '" +
                c.log_level + "'");
   if (!CheckPort(c.listen, /*required=*/true).ok())
-    return bad("listen must be HOST:PORT with a port in 0..65535; got '" + c.listen + "'");
+    return bad(key("listen") + " must be HOST:PORT with a port in 0..65535; got '" + c.listen +
+               "'");
   return absl::OkStatus();
 }
 

@@ -83,21 +83,20 @@ absl::StatusOr<std::array<double, 3>> PixdimSteps(const HeaderView& h, const std
 // (some writers fill in only the sform's offsets); a non-finite offset is taken as 0.
 absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::array<int, 3>& dims,
                                             const std::string& path) {
-  std::array<std::array<double, 3>, 3> m{};
   std::array<double, 3> offset{0, 0, 0};
   auto finite_offset = [&] {
     for (double& o : offset)
       if (!std::isfinite(o)) o = 0;
   };
   if (h.I16(kSformCodeOffset) > 0) {
+    std::array<std::array<double, 3>, 3> srow;
     for (int r = 0; r < 3; ++r) {
-      for (int i = 0; i < 3; ++i) m[r][i] = h.F32(kSrowOffset + 16 * r + 4 * i);
+      for (int i = 0; i < 3; ++i) srow[r][i] = h.F32(kSrowOffset + 16 * r + 4 * i);
       offset[r] = h.F32(kSrowOffset + 16 * r + 12);
     }
     finite_offset();
-    absl::StatusOr<Orientation> o = NearestAxes(m, offset, dims);
+    absl::StatusOr<Orientation> o = NearestAxes(srow, offset, dims);
     if (o.ok()) return o;
-    m = {};
   }
   ISOSTREAM_ASSIGN_OR_RETURN(const auto steps, PixdimSteps(h, path));
   if (h.I16(kQformCodeOffset) > 0) {  // its offset stands even if its rotation is damaged
@@ -124,8 +123,9 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
     absl::StatusOr<Orientation> o = NearestAxes(q, offset, dims);
     if (o.ok()) return o;
   }
-  for (int i = 0; i < 3; ++i) m[i][i] = steps[i];
-  absl::StatusOr<Orientation> o = NearestAxes(m, offset, dims);
+  std::array<std::array<double, 3>, 3> diagonal{};
+  for (int i = 0; i < 3; ++i) diagonal[i][i] = steps[i];
+  absl::StatusOr<Orientation> o = NearestAxes(diagonal, offset, dims);
   if (!o.ok())  // unreachable: positive finite steps on the diagonal
     return absl::InvalidArgumentError(path + ": " + std::string(o.status().message()));
   return o;

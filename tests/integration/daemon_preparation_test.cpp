@@ -9,7 +9,6 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <fstream>
 #include <memory>
 #include <string>
@@ -18,6 +17,7 @@
 #include <vector>
 
 #include "tests/integration/daemon_fixture.h"
+#include "tests/unit/volume_files.h"
 
 namespace isostream::testing {
 namespace {
@@ -48,30 +48,15 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
 // world's axes: the volume's info says how, with dims, spacing and origin along world axes.
 TEST(NoPreloadDaemon, VolumeInfoOfATurnedNiftiFile) {
   ScratchDir dir;
+  volume_files::NiftiFile nf;
+  nf.dims = {6, 5, 4};
+  nf.sform_code = 1;
+  nf.srow = std::array<std::array<float, 3>, 3>{{{-2, 0, 0}, {0, 0, 3}, {0, 0.5f, 0}}};
+  nf.sform_offset = {10, 20, 30};
   const std::string path = dir.path() + "/turned.nii";
-  {
-    std::vector<char> h(352, 0);
-    auto put = [&](int offset, auto value) { std::memcpy(&h[offset], &value, sizeof(value)); };
-    const int16_t dims[3] = {6, 5, 4};
-    put(0, int32_t{348});
-    put(40, int16_t{3});
-    for (int a = 0; a < 3; ++a) put(42 + 2 * a, dims[a]);
-    put(70, int16_t{16});  // float32
-    put(72, int16_t{32});
-    for (int a = 0; a < 4; ++a) put(76 + 4 * a, 1.0f);
-    put(108, 352.0f);
-    put(254, int16_t{1});  // sform_code
-    const float rows[3][4] = {{-2, 0, 0, 10}, {0, 0, 3, 20}, {0, 0.5f, 0, 30}};
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 4; ++c) put(280 + 16 * r + 4 * c, rows[r][c]);
-    std::memcpy(&h[344], "n+1", 4);
-    std::ofstream out(path, std::ios::binary);
-    out.write(h.data(), std::streamsize(h.size()));
-    for (int i = 0; i < 6 * 5 * 4; ++i) {
-      const float v = float(i % 7);
-      out.write(reinterpret_cast<const char*>(&v), sizeof(v));
-    }
-  }
+  volume_files::WriteBytes(
+      path, volume_files::Concat(nf.Header(), volume_files::Samples(volume_files::Type::kFloat32,
+                                                                    nf.dims, false)));
   DaemonProcess daemon;
   ASSERT_TRUE(daemon.Start({"--volume", "turned=" + path, "--no-preload", "--no-cache"},
                            dir.path() + "/isostreamd.log"));
