@@ -26,4 +26,11 @@ std::string FrameNote(int64_t triangles, int64_t budget, double eps_used,
   return "";
 }
 
+std::string BudgetLimitNote(int64_t budget, int64_t fitted, double eps_used) {
+  if (fitted <= 0 || fitted >= budget || eps_used <= 0) return "";
+  return "the budget of " + std::to_string(budget) +
+         " triangles is over the daemon's frame limit: the frame was fitted to its limit of " +
+         std::to_string(fitted) + " (isostreamd --max-triangles)";
+}
+
 }  // namespace isostream

@@ -33,4 +33,9 @@ bool NoteIsovaluesOutside(const char* tool, const Isovalues& isovalues, double m
 std::string FrameNote(int64_t triangles, int64_t budget, double eps_used,
                       bool some_isovalue_inside);
 
+// For a daemon's frame asked for with `budget` and fitted to `fitted` (FrameStats::
+// triangle_budget): when the daemon's frame limit lowered the budget and that made the mesh
+// coarser (eps_used > 0), says so; the user's budget alone would not explain the eps.
+std::string BudgetLimitNote(int64_t budget, int64_t fitted, double eps_used);
+
 }  // namespace isostream

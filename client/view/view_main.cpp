@@ -247,8 +247,8 @@ int Run(const Args& args) {
     auto parsed = ParseNumbers(args.iso, "--iso");
     if (!parsed.ok()) return Fail(parsed.status());
     iso = *parsed;
-    some_inside = NoteIsovaluesOutside("isostream-view", iso, info->min_value(),
-                                       info->max_value(), args.volume);
+    some_inside = NoteIsovaluesOutside("isostream-view", iso, info->min_value(), info->max_value(),
+                                       args.volume);
   }
   render::Camera base;
   base.aspect = float(width) / float(height);
@@ -358,6 +358,10 @@ int Run(const Args& args) {
     const std::string note = FrameNote(int64_t(frame->mesh.triangle_count()), state.budget,
                                        frame->stats.eps_used(), some_inside);
     if (!note.empty() && i == 0) std::fprintf(stderr, "isostream-view: note: %s\n", note.c_str());
+    const std::string limit_note =
+        BudgetLimitNote(state.budget, frame->stats.triangle_budget(), frame->stats.eps_used());
+    if (!limit_note.empty() && i == 0)
+      std::fprintf(stderr, "isostream-view: note: %s\n", limit_note.c_str());
   }
   // Every frame asked for is written: how the stream ends now (a daemon stopping, say) changes
   // nothing the user asked for.

@@ -102,7 +102,7 @@ int RunFetch(const FetchArgs& args) {
   auto request = MakeRequest(args.view, bounds);
   if (!request.ok()) return fail(std::string(request.status().message()), 2);
   const bool some_inside = NoteIsovaluesOutside("isostream fetch", request->isovalues,
-                                                 info->min_value(), info->max_value(), args.volume);
+                                                info->min_value(), info->max_value(), args.volume);
 
   auto frame = (*client)->Fetch(ToViewRequest(*request, args));
   if (!frame.ok()) return fail(net::ExplainCallError(frame.status(), options), 1);
@@ -113,6 +113,9 @@ int RunFetch(const FetchArgs& args) {
     std::printf("triangles     %lld  (vertices on the server %lld)\n", (long long)s.triangles(),
                 (long long)s.vertices());
     std::printf("eps used      %s\n", ShortestText(s.eps_used()).c_str());
+    if (s.triangle_budget() > 0)
+      std::printf("budget        %lld%s\n", (long long)s.triangle_budget(),
+                  s.triangle_budget() < request->budget ? "  (the daemon's frame limit)" : "");
     std::printf("chunks        %d, %lld bytes (%.2f bytes/triangle)\n", frame->chunks,
                 (long long)frame->bytes,
                 s.triangles() > 0 ? double(frame->bytes) / double(s.triangles()) : 0.0);
@@ -122,6 +125,9 @@ int RunFetch(const FetchArgs& args) {
   const std::string note = FrameNote(int64_t(frame->mesh.triangle_count()), request->budget,
                                      frame->stats.eps_used(), some_inside);
   if (!note.empty()) std::cerr << "isostream fetch: note: " << note << "\n";
+  const std::string limit_note =
+      BudgetLimitNote(request->budget, frame->stats.triangle_budget(), frame->stats.eps_used());
+  if (!limit_note.empty()) std::cerr << "isostream fetch: note: " << limit_note << "\n";
   std::fprintf(stderr, "wrote %s: %zu triangles %s (eps %s)\n", args.output.c_str(),
                frame->mesh.triangle_count(),
                args.view.order == "none" ? "unordered" : "in back-to-front order",

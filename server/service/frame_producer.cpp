@@ -1,7 +1,6 @@
 #include "server/service/frame_producer.h"
 
 #include <algorithm>
-
 #include <cmath>
 #include <condition_variable>
 #include <memory>
@@ -219,6 +218,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
       st->set_extract_ms(stats->total_ms);
       st->set_budget_passes(stats->budget_passes);
       st->set_reordered(stats->reordered);
+      st->set_triangle_budget(request.budget);
       st->set_chunk_count(int32_t(index + 1));
     }
     cut_end += count;

@@ -85,6 +85,19 @@ TEST_F(GuardedDaemon, BudgetOverTheTriangleLimitIsTheLimit) {
   ASSERT_TRUE(frame.ok()) << frame.status();
   EXPECT_GT(frame->mesh.triangle_count(), 50'000u);
   EXPECT_LE(frame->mesh.triangle_count(), 100'000u);
+  EXPECT_EQ(frame->stats.triangle_budget(), 100'000);  // what the frame was fitted to
+  EXPECT_GT(frame->stats.eps_used(), 0.0);
+  // The CLI says why the mesh is coarser than the budget asked for.
+  const testing::CommandResult fetched = testing::RunCommand(
+      std::string(ISOSTREAM_CLI_PATH) + " fetch --server " + daemon_->address() +
+      " --token s3cret --volume buckyball:65 --iso 0.05,0.15,0.25 --budget 1e9 --stats -o " +
+      scratch_->path() + "/limited.ply");
+  EXPECT_EQ(fetched.code, 0) << fetched.output;
+  EXPECT_NE(fetched.output.find("budget        100000  (the daemon's frame limit)"),
+            std::string::npos)
+      << fetched.output;
+  EXPECT_NE(fetched.output.find("the frame was fitted to its limit of 100000"), std::string::npos)
+      << fetched.output;
 }
 
 // SIGHUP (a closing terminal) stops it as SIGTERM does (ConfiguredDaemon's shutdown test): its
@@ -447,14 +460,14 @@ TEST_F(OneSlotDaemon, ACancelledJobWaitingForAPreparationGivesItsSlotBack) {
     auto session = c->OpenSession();
     ASSERT_TRUE(session.ok());
     ASSERT_TRUE((*session)->Send(MakeView("cayley:65", 1, 0.01, glm::dvec3(3, 2, 4))).ok());
-    ASSERT_TRUE(WaitForOpenSessions(*c, 1, std::chrono::steady_clock::now() +
-                                               std::chrono::seconds(2)));
+    ASSERT_TRUE(
+        WaitForOpenSessions(*c, 1, std::chrono::steady_clock::now() + std::chrono::seconds(2)));
     std::this_thread::sleep_for(std::chrono::milliseconds(150));
     (*session)->Cancel();  // the client is gone; the volume is still being prepared
   }
   // The slot comes back within a second, while the preparation has ~2.8 s to go.
-  ASSERT_TRUE(WaitForOpenSessions(*c, 0, std::chrono::steady_clock::now() +
-                                             std::chrono::seconds(1)))
+  ASSERT_TRUE(
+      WaitForOpenSessions(*c, 0, std::chrono::steady_clock::now() + std::chrono::seconds(1)))
       << DaemonLog(*scratch_);
   EXPECT_EQ(PreparedCount("cayley:65"), 0) << "the slot came back only when the preparation ended";
   // The same volume again: it waits for the preparation in progress, not for a second one.
@@ -580,8 +593,7 @@ TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
   EXPECT_EQ(first.Stop(SIGTERM), 0);
   // An address of no interface here (TEST-NET-1: binding it sends nothing) is told apart from
   // a busy port: both were "the port is in use, or the address is not this machine's".
-  r = RunCommand(std::string("timeout 20 ") + ISOSTREAMD_PATH +
-                 " --no-cache --listen 192.0.2.1:0");
+  r = RunCommand(std::string("timeout 20 ") + ISOSTREAMD_PATH + " --no-cache --listen 192.0.2.1:0");
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("cannot listen on 192.0.2.1:0: the address is not this machine's"),
             std::string::npos)

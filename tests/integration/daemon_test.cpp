@@ -260,6 +260,7 @@ TEST_F(Daemon, FetchCommandWritesTheFrame) {
   EXPECT_NE(noted.output.find("isovalue 99 lies outside cayley:33's values"), std::string::npos)
       << noted.output;
   EXPECT_NE(noted.output.find("over the budget of 1"), std::string::npos) << noted.output;
+  EXPECT_EQ(noted.output.find("frame limit"), std::string::npos) << noted.output;  // under it
 }
 
 TEST_F(Daemon, StatusCodes) {
