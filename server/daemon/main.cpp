@@ -7,6 +7,7 @@
 // stops that preparation, lets frames in flight finish (bounded wait) and exits 0, without
 // waiting more than a second for a preparation that cannot stop mid-step.
 #include <google/protobuf/stubs/logging.h>
+#include <grpc/support/log.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <grpcpp/security/server_credentials.h>
@@ -62,6 +63,14 @@ void ProtobufLog(google::protobuf::LogLevel level, const char* file, int line,
     spdlog::critical("protobuf {}:{}: {}", file, line, message);
   else
     spdlog::debug("protobuf {}:{}: {}", file, line, message);
+}
+
+// gRPC's own messages went to stderr raw: a port in use printed a nested error dump before the
+// daemon's one line saying so, and a client speaking plaintext to a TLS port logs a handshake
+// error per attempt, so any client could flood the log. They go to the log at debug level, as
+// protobuf's do: what fails for the daemon or a caller it says itself.
+void GrpcLog(gpr_log_func_args* args) {
+  spdlog::debug("grpc {}:{}: {}", args->file, args->line, args->message);
 }
 
 int Run(const DaemonConfig& config) {
@@ -178,6 +187,7 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   signal(SIGPIPE, SIG_IGN);
   google::protobuf::SetLogHandler(&ProtobufLog);
+  gpr_set_log_function(&GrpcLog);
 
   CLI::App app{
       "isostreamd: streams view-ordered transparent isosurfaces over gRPC.\n"
@@ -295,5 +305,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   spdlog::set_level(spdlog::level::from_str(config.log_level));
+  // gRPC formats only what reaches its verbosity (errors by default): all of it for a trace.
+  if (config.log_level == "trace") gpr_set_log_verbosity(GPR_LOG_SEVERITY_DEBUG);
   return Run(config);
 }

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstring>
 #include <filesystem>
@@ -590,6 +591,9 @@ TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
   EXPECT_NE(r.output.find("cannot listen on " + first.address() + ": the port is in use"),
             std::string::npos)
       << r.output;
+  // That line alone, without gRPC's nested error dump before it.
+  EXPECT_EQ(r.output.find("chttp2"), std::string::npos) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
   EXPECT_EQ(first.Stop(SIGTERM), 0);
   // An address of no interface here (TEST-NET-1: binding it sends nothing) is told apart from
   // a busy port: both were "the port is in use, or the address is not this machine's".
