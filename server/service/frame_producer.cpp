@@ -85,7 +85,9 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
                                 CoarseHint* hint, RetainedFrame* retained) const {
   const RetainedCut* same_mesh = retained ? retained->Find(volume, request) : nullptr;
   if (view.progressive() && same_mesh == nullptr) {
-    const int64_t coarse = settings_.coarse_triangles;
+    // Never over the frame limit: a coarse budget past it refused a progressive view as if
+    // even the coarsest mesh were over the limit.
+    const int64_t coarse = std::min<int64_t>(settings_.coarse_triangles, settings_.max_triangles);
     // A count that stops past the coarse budget is cheap, and avoids sending a "coarse" frame
     // that is the requested one (or finer): for an eps, at that eps; for a budget, at eps 0
     // (the whole mesh fits it). A budget of at most twice the coarse one gets no coarse frame:
@@ -246,10 +248,14 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
 
   // Whether the frame has room for another chunk now: kNo while the client has not taken
   // enough of the queued ones, kStop once the frame must stop. Called with state.mu held.
+  // The deadline bounds extraction and encoding, not delivery: once the mesh is extracted, a
+  // client that reads slowly but steadily gets the frame (a 3.6 M-triangle frame read at
+  // ~200 KB/s was refused as past the deadline, blaming the server's time), and one that stops
+  // reading is cut by the stall reaper (a write untaken for a frame deadline: chunk_stream.h).
   enum class Room { kYes, kNo, kStop };
-  auto room_locked = [&] {
+  auto room_locked = [&](bool extracting) {
     if (cancel->load()) return Room::kStop;
-    if (Clock::now() > deadline) {
+    if (extracting && Clock::now() > deadline) {
       stop(past_deadline());
       return Room::kStop;
     }
@@ -261,7 +267,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   auto wait_for_room = [&] {
     std::unique_lock<std::mutex> lock(state.mu);
     for (;;) {
-      const Room room = room_locked();
+      const Room room = room_locked(false);
       if (room != Room::kNo) return room == Room::kYes;
       state.cv.wait_for(lock, std::chrono::milliseconds(1));
     }
@@ -274,7 +280,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
         if (!wait_for_room()) return false;
       } else {
         std::lock_guard<std::mutex> lock(state.mu);
-        const Room room = room_locked();
+        const Room room = room_locked(true);
         if (room != Room::kYes) return room == Room::kNo;
       }
       cut(mesh, chunk_size(state.chunks.size()), false, nullptr);

@@ -578,6 +578,33 @@ TEST(DaemonStart, CoarsestMeshOverTheLimitIsExplained) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
+// A progressive view's coarse frame stays within --max-triangles: its budget (20,000 by
+// default) was not capped, so a view over a limit of 1,000 was refused as if even the coarsest
+// mesh were over it. Now the coarse frame arrives and the view itself is told to raise eps.
+TEST(DaemonStart, CoarseFrameKeepsToTheTriangleLimit) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache", "--max-triangles", "1000"}, dir.path() + "/d.log"));
+  net::ClientOptions o;
+  o.address = daemon.address();
+  auto c = net::Client::Connect(o);
+  ASSERT_TRUE(c.ok());
+  pb::ViewRequest view = MakeView("buckyball:65", 1, 0.002, glm::dvec3(2, 2, 2));
+  view.set_progressive(true);
+  int64_t coarse_triangles = 0;
+  const absl::Status s = (*c)->Fetch(view,
+                                     [&](const pb::FrameChunk& chunk) {
+                                       if (chunk.coarse())
+                                         coarse_triangles += chunk.triangle_count();
+                                     })
+                             .status();
+  EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted) << s;
+  EXPECT_NE(s.message().find("raise eps or give a triangle budget"), std::string::npos) << s;
+  EXPECT_GT(coarse_triangles, 0);
+  EXPECT_LE(coarse_triangles, 1000);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 // A daemon that cannot serve as asked stops at start, exit 1, saying why: a port another
 // daemon holds (gRPC's default SO_REUSEPORT would have let both listen and split the
 // clients between them), and TLS files that hold no PEM (gRPC blames the port for those).
@@ -675,6 +702,34 @@ TEST_F(StalledClientDaemon, AClientThatStopsReadingLosesItsSlot) {
   ASSERT_TRUE(stats.ok());
   EXPECT_EQ(stats->sessions_open(), 0);
   EXPECT_EQ(stats->streams_stalled(), 1);
+}
+
+// A client that reads steadily but slowly gets the whole frame, even when its delivery takes
+// longer than the frame deadline (2 s here): the deadline bounds extraction and encoding. A
+// 3.6 M-triangle frame read at ~200 KB/s was refused as past the deadline.
+TEST_F(StalledClientDaemon, ASlowReaderGetsTheWholeFrame) {
+  using Clock = std::chrono::steady_clock;
+  auto c = Connect();
+  auto session = c->OpenSession();
+  ASSERT_TRUE(session.ok());
+  // ~1.5 M triangles, raw (45,000 per chunk): ~34 chunks of ~1.2 MB, most of them past what
+  // the transport buffers hold, read one per 150 ms: over 3 s of reading.
+  ASSERT_TRUE(
+      (*session)->Send(MakeView("buckyball:257", 1, 0.0005, glm::dvec3(2, 2, 2), pb::RAW)).ok());
+  const Clock::time_point t0 = Clock::now();
+  pb::FrameChunk chunk;
+  int chunks = 0;
+  bool last = false;
+  while (!last && (*session)->Read(&chunk)) {
+    ++chunks;
+    last = chunk.last();
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  }
+  EXPECT_TRUE(last) << "the frame ended after " << chunks << " chunks";
+  EXPECT_GT(Clock::now() - t0, std::chrono::milliseconds(3000)) << "delivery was not slow: "
+                                                                << "nothing tested";
+  ASSERT_TRUE((*session)->CloseSend().ok());
+  EXPECT_TRUE((*session)->Finish().ok());
 }
 
 // Sessions orbiting meshes of their own at once: frames are recorded and re-ordered on several
