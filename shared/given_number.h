@@ -27,7 +27,7 @@ inline CLI::Validator GivenCount() {
         char* end = nullptr;
         const double v = std::strtod(text.c_str(), &end);
         if (end != text.c_str() && *end == '\0' && std::isfinite(v) && v == std::floor(v) &&
-            std::abs(v) < 9e18)
+            std::abs(v) < 9223372036854775808.0)  // 2^63: every such whole double fits
           text = std::to_string(static_cast<long long>(v));
         return std::string();
       },

@@ -25,6 +25,7 @@
 #include "server/daemon/listen_failure.h"
 #include "server/service/config.h"
 #include "server/service/service.h"
+#include "shared/given_number.h"
 #include "shared/malloc_tuning.h"
 
 namespace {
@@ -244,6 +245,11 @@ int main(int argc, char** argv) {
                                   "the same mesh instead of extracted (default 1024; 0: off)");
   auto* o_log =
       app.add_option("--log-level", log_level, "trace|debug|info|warn|error|critical|off");
+  // Counts may be written with an exponent ("--max-triangles 1e6"), as the config file and the
+  // clients' options take them.
+  for (CLI::Option* count : {o_threads, o_sessions, o_tris, o_iso, o_deadline, o_idle, o_cache_max,
+                             o_dim, o_generator_mb, o_chunk, o_retain})
+    count->transform(isostream::GivenCount());
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

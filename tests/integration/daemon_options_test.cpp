@@ -25,8 +25,9 @@ class GuardedDaemon : public Daemon {
  protected:
   static void SetUpTestSuite() {
     StartSuiteDaemon([](const std::string& dir) {
+      // "1e5": counts may be written with an exponent.
       return std::vector<std::string>{"--cache-dir", dir + "/cache", "--threads",       "2",
-                                      "--token",     "s3cret",       "--max-triangles", "100000"};
+                                      "--token",     "s3cret",       "--max-triangles", "1e5"};
     });
   }
 };
@@ -524,6 +525,8 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
       // Named as the flag too, not only as the config key.
       {"--max-sessions 2000000000", "max_sessions (--max-sessions) must be in 1..4096"},
       {"--generator-mb 0", "generator_mb (--generator-mb) must be in 1..1073741824"},
+      // Counts take exponents (GuardedDaemon starts with --max-triangles 1e5), not fractions.
+      {"--max-triangles 2.5", "Could not convert: --max-triangles = 2.5"},
       {"--token ''", "--token is empty"},
       {"--token \"$(printf 'a\\tb')\"", "token must be printable ASCII"},
       {"--bogus", "--bogus"}};

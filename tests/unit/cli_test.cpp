@@ -263,6 +263,10 @@ TEST(Cli, BudgetsWithAnExponent) {
   EXPECT_EQ(exponent.code, 0) << exponent.output;
   EXPECT_EQ(exponent.output, plain.output);
   EXPECT_NE(Cli(args + "1.5").code, 0);
+  // Up to int64's end: 9e18 (below 2^63) was refused as "Could not convert".
+  const CliRun near_end = Cli(args + "9.2e18");
+  EXPECT_EQ(near_end.code, 0) << near_end.output;
+  EXPECT_EQ(near_end.output, Cli(args + "9200000000000000000").output);
 }
 
 // info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,
