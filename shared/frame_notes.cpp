@@ -4,7 +4,7 @@
 
 namespace isostream {
 
-std::string IsovalueOutsideNote(double iso, double min_value, double max_value,
+std::string IsovalueOutsideNote(float iso, float min_value, float max_value,
                                 const std::string& volume) {
   if (iso >= min_value && iso <= max_value) return "";
   return "isovalue " + ShortestText(iso) + " lies outside " + volume + "'s values [" +
@@ -18,8 +18,12 @@ std::string FrameNote(int64_t triangles, int64_t budget, double eps_used,
     return "the coarsest mesh (eps " + ShortestText(eps_used) + ") has " +
            std::to_string(triangles) + " triangles, over the budget of " + std::to_string(budget) +
            ": no coarser mesh exists";
-  // Only an eps above 0 can be lowered; a budget's search never stops at an empty mesh above 0
-  // (an empty mesh fits any budget, so it goes on to eps 0).
+  // Only an eps above 0 can be lowered. A budget's search stops at an empty mesh above 0 when
+  // the next finer mesh is over the budget (a budget of 1, say): the budget is what to change.
+  if (triangles == 0 && eps_used > 0 && some_isovalue_inside && budget > 0)
+    return "the mesh is empty at eps " + ShortestText(eps_used) +
+           ": the next finer mesh is over the budget of " + std::to_string(budget) +
+           " triangles; a larger budget draws the surfaces";
   if (triangles == 0 && eps_used > 0 && some_isovalue_inside)
     return "the mesh is empty at eps " + ShortestText(eps_used) +
            ": a smaller eps (data units) refines the coarse tetrahedra that miss the surfaces";

@@ -10,16 +10,18 @@
 namespace isostream {
 
 // "isovalue 5 lies outside VOLUME's values [0, 1]: no surface for it".
-std::string IsovalueOutsideNote(double iso, double min_value, double max_value,
+// In single precision, as the extraction compares them (a float isovalue widened to double
+// printed as 4.900000095367432).
+std::string IsovalueOutsideNote(float iso, float min_value, float max_value,
                                 const std::string& volume);
 
 // Prints "TOOL: note: ..." to stderr for each isovalue outside [min_value, max_value], and
 // returns whether some isovalue lies within (FrameNote's some_isovalue_inside).
 template <typename Isovalues>
-bool NoteIsovaluesOutside(const char* tool, const Isovalues& isovalues, double min_value,
-                          double max_value, const std::string& volume) {
+bool NoteIsovaluesOutside(const char* tool, const Isovalues& isovalues, float min_value,
+                          float max_value, const std::string& volume) {
   bool some_inside = false;
-  for (const double iso : isovalues) {
+  for (const float iso : isovalues) {
     const std::string note = IsovalueOutsideNote(iso, min_value, max_value, volume);
     if (!note.empty()) std::fprintf(stderr, "%s: note: %s\n", tool, note.c_str());
     some_inside |= note.empty();

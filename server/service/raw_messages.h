@@ -27,7 +27,8 @@ bool AcceptUnary(const ServiceCore& core, grpc::CallbackServerContext* context,
                  grpc::ServerUnaryReactor* reactor, const grpc::ByteBuffer& bytes,
                  Request* request) {
   if (!core.Authorized(context)) {
-    reactor->Finish(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong token"));
+    reactor->Finish(
+        grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong bearer token"));
     return false;
   }
   const absl::Status parsed = Parse(bytes, request);

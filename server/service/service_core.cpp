@@ -3,7 +3,9 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstdlib>
+#include <string_view>
 #include <vector>
 
 namespace isostream::service {
@@ -48,16 +50,26 @@ ServiceCore::ServiceCore(const DaemonConfig& c)
 
 bool ServiceCore::Authorized(const grpc::CallbackServerContext* ctx) const {
   if (config.token.empty()) return true;
-  const auto& md = ctx->client_metadata();
-  auto it = md.find("authorization");
-  if (it == md.end()) return false;
-  const std::string given(it->second.data(), it->second.size());
-  const std::string expected = "Bearer " + config.token;
-  // Constant time in the token's content, so timing does not reveal a matching prefix.
-  unsigned diff = given.size() != expected.size();
-  for (size_t i = 0; i < std::min(given.size(), expected.size()); ++i)
-    diff |= unsigned(given[i] ^ expected[i]);
-  return diff == 0;
+  // Any of the call's authorization headers may carry it; the scheme's name is case-insensitive
+  // (RFC 7235: "bearer TOKEN" was refused).
+  const auto [first, end] = ctx->client_metadata().equal_range("authorization");
+  bool matched = false;
+  for (auto it = first; it != end; ++it) {
+    const std::string_view given(it->second.data(), it->second.size());
+    constexpr std::string_view kScheme = "bearer ";
+    if (given.size() < kScheme.size() ||
+        !std::equal(kScheme.begin(), kScheme.end(), given.begin(), [](char a, char b) {
+          return a == std::tolower(static_cast<unsigned char>(b));
+        }))
+      continue;
+    const std::string_view token = given.substr(kScheme.size());
+    // Constant time in the token's content, so timing does not reveal a matching prefix.
+    unsigned diff = token.size() != config.token.size();
+    for (size_t i = 0; i < std::min(token.size(), config.token.size()); ++i)
+      diff |= unsigned(token[i] ^ config.token[i]);
+    matched |= diff == 0;
+  }
+  return matched;
 }
 
 absl::Status ServiceCore::Admit() {

@@ -20,7 +20,7 @@ absl::StatusOr<VolumePtr> LoadRawFile(const VolumeSpec& spec, const std::atomic<
   // Compressed only when named so: samples are any bytes, and a plain file whose first two
   // are gzip's magic was refused as corrupt gzip.
   GzInput input;
-  ISOSTREAM_RETURN_IF_ERROR(input.Open(path, !absl::EndsWith(path, ".gz")));
+  ISOSTREAM_RETURN_IF_ERROR(input.Open(path, !absl::EndsWithIgnoreCase(path, ".gz")));
   const int64_t expected =
       int64_t{spec.dims[0]} * spec.dims[1] * spec.dims[2] * SampleBytes(layout.type);
   // More bytes than the spec describes almost always means wrong dims or type, which would load

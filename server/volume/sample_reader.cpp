@@ -12,6 +12,8 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <string>
+#include <string_view>
 #include <type_traits>
 #include <vector>
 
@@ -102,6 +104,17 @@ void DecodeSamples(const SampleLayout& layout, const unsigned char* in, size_t c
     case SampleType::kFloat64:
       return Decode<double>(in, count, swap, s, c, out);
   }
+}
+
+// zlib's message for a gzip file opened by name starts with that name, which ours already
+// gives: "x.gz: corrupt data: x.gz: unexpected end of file".
+std::string GzMessage(const char* message, const std::string& path) {
+  if (message == nullptr) return "read error";
+  std::string_view m(message);
+  if (m.size() > path.size() + 2 && m.substr(0, path.size()) == path &&
+      m.substr(path.size(), 2) == ": ")
+    m.remove_prefix(path.size() + 2);
+  return std::string(m);
 }
 
 }  // namespace
@@ -227,15 +240,15 @@ absl::StatusOr<size_t> GzInput::Read(void* out, size_t size) {
     if (got < 0) {
       int code = 0;
       const char* message = gzerror(file_, &code);
-      return absl::DataLossError(path_ + ": corrupt data: " + (message ? message : "read error"));
+      return absl::DataLossError(path_ + ": corrupt data: " + GzMessage(message, path_));
     }
     if (got == 0) {
       int code = 0;
       const char* message = gzerror(file_, &code);
       // A gzip stream cut short reports Z_BUF_ERROR at the end instead of a clean EOF.
       if (code != Z_OK && code != Z_STREAM_END) {
-        return absl::DataLossError(
-            path_ + ": corrupt or truncated data: " + (message ? message : "read error"));
+        return absl::DataLossError(path_ +
+                                   ": corrupt or truncated data: " + GzMessage(message, path_));
       }
       break;
     }

@@ -53,6 +53,23 @@ TEST_F(GuardedDaemon, TokenIsRequired) {
   ASSERT_TRUE(health.ok());
   EXPECT_TRUE(*health);
   EXPECT_TRUE(Connect("s3cret")->Fetch(view).ok());
+  // The scheme's name is case-insensitive (RFC 7235), and any authorization header may carry
+  // the token ("bearer s3cret" was refused, and a second header was never read).
+  auto stub = pb::Isostream::NewStub(
+      grpc::CreateChannel(daemon_->address(), grpc::InsecureChannelCredentials()));
+  auto stats_with = [&](const std::vector<std::string>& headers) {
+    grpc::ClientContext context;
+    for (const std::string& h : headers) context.AddMetadata("authorization", h);
+    pb::GetServerStatsRequest request;
+    pb::ServerStats stats;
+    return stub->GetServerStats(&context, request, &stats).error_code();
+  };
+  EXPECT_EQ(stats_with({"bearer s3cret"}), grpc::StatusCode::OK);
+  EXPECT_EQ(stats_with({"BEARER s3cret"}), grpc::StatusCode::OK);
+  EXPECT_EQ(stats_with({"Basic abc", "Bearer s3cret"}), grpc::StatusCode::OK);
+  EXPECT_EQ(stats_with({"Bearer S3cret"}), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(stats_with({"Bearers3cret"}), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(stats_with({"s3cret"}), grpc::StatusCode::UNAUTHENTICATED);
   // gRPC aborts on metadata it cannot send: such a token is refused before any call.
   for (const char* bad : {"a\nb", "t\xc3\xb6k", "\x7f"}) {
     net::ClientOptions o;

@@ -217,9 +217,14 @@ TEST(Cli, IsovaluesOutsideTheDataAreNamed) {
   const CliRun r = Cli("extract --volume sphere:17 --iso 0,5 --eps 0 --no-cache -o " +
                        TempPath("cli-outside.ply"));
   EXPECT_EQ(r.code, 0) << r.output;
-  EXPECT_NE(r.output.find("isovalue 5 lies outside sphere:17's values [0, 1.7"), std::string::npos)
+  EXPECT_NE(r.output.find("isovalue 5 lies outside sphere:17's values [0, 1.7320508]"),
+            std::string::npos)
       << r.output;
   EXPECT_EQ(r.output.find("isovalue 0 lies"), std::string::npos) << r.output;
+  // Single-precision values in their shortest form (4.9 printed as 4.900000095367432).
+  const CliRun tenths = Cli("extract --volume sphere:17 --iso 4.9 --eps 0 --no-cache -o " +
+                            TempPath("cli-outside.ply"));
+  EXPECT_NE(tenths.output.find("isovalue 4.9 lies outside"), std::string::npos) << tenths.output;
   const CliRun info = Cli("info --volume sphere:17 --iso 0,5 --no-cache");
   EXPECT_EQ(info.code, 0) << info.output;
   EXPECT_NE(info.output.find("isovalue 5 lies outside sphere:17's values"), std::string::npos)
@@ -243,6 +248,13 @@ TEST(Cli, SurprisingFramesAreExplained) {
   EXPECT_EQ(over.find("found for the budget"), std::string::npos) << over;
   const std::string empty = extract("sphere:17", "--iso 0.5 --eps 100");
   EXPECT_NE(empty.find("the mesh is empty at eps 100"), std::string::npos) << empty;
+  // A budget under the first mesh that has triangles: the budget is what to change, not an eps
+  // the user never gave.
+  const std::string empty_budget = extract("sphere:17", "--iso 0.5 --budget 1");
+  EXPECT_NE(empty_budget.find("the next finer mesh is over the budget of 1 triangles"),
+            std::string::npos)
+      << empty_budget;
+  EXPECT_EQ(empty_budget.find("a smaller eps"), std::string::npos) << empty_budget;
   const std::string fine = extract("sphere:17", "--iso 0.5 --eps 0");
   EXPECT_EQ(fine.find("note:"), std::string::npos) << fine;
   // No advice to lower an eps of 0, nor for isovalues the volume never reaches (their own note

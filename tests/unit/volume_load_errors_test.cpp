@@ -258,6 +258,11 @@ TEST(VolumeLoadErrors, TruncatedData) {
   path = ScratchPath("cut_stream.nii.gz");
   WriteBytes(path, gz);
   ExpectError(LoadVolume(path), absl::StatusCode::kDataLoss, "cut_stream.nii.gz");
+  {
+    // The path once: zlib's message repeated it ("x.gz: corrupt ...: x.gz: unexpected end").
+    const std::string message(LoadVolume(path).status().message());
+    EXPECT_EQ(message.find(path), message.rfind(path)) << message;
+  }
 
   path = ScratchPath("short_header.nii");
   WriteBytes(path, std::vector<unsigned char>(full.begin(), full.begin() + 200));
@@ -296,6 +301,19 @@ TEST(VolumeLoadErrors, GzipRawFileLargerThanSpec) {
               "long.raw.gz", "more than the 64 bytes");
   absl::StatusOr<VolumePtr> exact = LoadVolume("raw:" + path + ":4x4x5:uint8");
   ASSERT_TRUE(exact.ok()) << exact.status();
+  // The suffix in any case, as NIfTI's ".nii.gz" is: ".GZ" was read as plain bytes.
+  const std::string upper = ScratchPath("upper.raw.GZ");
+  WriteGz(upper, Samples(Type::kUint8, {4, 4, 5}, false));
+  absl::StatusOr<VolumePtr> from_upper = LoadVolume("raw:" + upper + ":4x4x5:uint8");
+  ASSERT_TRUE(from_upper.ok()) << from_upper.status();
+  const auto a = (*exact)->grid->getConstAccessor(), b = (*from_upper)->grid->getConstAccessor();
+  for (int z = 0; z < 5; ++z)
+    for (int y = 0; y < 4; ++y)
+      for (int x = 0; x < 4; ++x) {
+        const auto& m = (*exact)->index_min;
+        const openvdb::Coord ijk(m[0] + x, m[1] + y, m[2] + z);
+        ASSERT_EQ(a.getValue(ijk), b.getValue(ijk)) << ijk;
+      }
 }
 
 TEST(VolumeLoadErrors, DimsBelowTwo) {
