@@ -21,8 +21,9 @@ void AddVolumeOptions(CLI::App* cmd, VolumeArgs* args) {
       ->check(CLI::Range(0, 1024));
   cmd->add_option("--cache-dir", args->cache_dir, "hierarchy cache directory");
   cmd->add_flag("--no-cache", args->no_cache, "always rebuild the hierarchy, store nothing");
-  cmd->add_option("--max-dim", args->max_dim, "largest accepted samples per axis")
-      ->check(CLI::Range(2, 4097));
+  // The hierarchy holds a volume as a cube of at most 1025^3 points, its longest side cubed.
+  cmd->add_option("--max-dim", args->max_dim, "largest accepted samples per axis (2..1025)")
+      ->check(CLI::Range(2, 1025));
 }
 
 namespace {

@@ -185,8 +185,10 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   // frame then failed at once).
   if (c.limits.deadline_ms < 1 || c.limits.deadline_ms > 86'400'000)
     return bad(key("deadline_ms") + " must be in 1..86400000");
-  if (c.limits.max_dim < 2 || c.limits.max_dim > 4097)
-    return bad(key("max_dim") + " must be in 2..4097");
+  // A volume is held as a 2^k+1 cube of at most 1025^3 points (its longest side cubed): a larger
+  // side could never be prepared.
+  if (c.limits.max_dim < 2 || c.limits.max_dim > 1025)
+    return bad(key("max_dim") + " must be in 2..1025");
   if (c.limits.generator_mb < 1 || c.limits.generator_mb > (int64_t{1} << 30))
     return bad(key("generator_mb") + " must be in 1..1073741824");
   if (c.limits.idle_timeout_s < 0 || c.limits.idle_timeout_s > 7 * 86400)

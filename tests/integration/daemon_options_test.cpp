@@ -542,6 +542,7 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
       // Named as the flag too, not only as the config key.
       {"--max-sessions 2000000000", "max_sessions (--max-sessions) must be in 1..4096"},
       {"--generator-mb 0", "generator_mb (--generator-mb) must be in 1..1073741824"},
+      {"--max-dim 1026", "max_dim (--max-dim) must be in 2..1025"},
       // Counts take exponents (GuardedDaemon starts with --max-triangles 1e5), not fractions.
       {"--max-triangles 2.5", "Could not convert: --max-triangles = 2.5"},
       {"--token ''", "--token is empty"},
