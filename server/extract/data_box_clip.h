@@ -106,14 +106,18 @@ inline int ClipToDataBox(const Context& c, ClipVertex* poly, int count) {
       const bool pin = p.p[axis] <= limit, qin = q.p[axis] <= limit;
       if (pin) next[m++] = p;
       if (pin != qin && p.p[axis] != limit && q.p[axis] != limit) {
-        const double s = (double(limit) - p.p[axis]) / (double(q.p[axis]) - p.p[axis]);
+        // From the edge's ends in one order (inside end first), whichever way this polygon runs
+        // along it: the triangle across the edge then makes the same bits (ClipVertexKey).
+        const ClipVertex& a = pin ? p : q;
+        const ClipVertex& b = pin ? q : p;
+        const double s = (double(limit) - a.p[axis]) / (double(b.p[axis]) - a.p[axis]);
         ClipVertex& x = next[m++];
-        x.p = glm::vec3(glm::mix(glm::dvec3(p.p), glm::dvec3(q.p), s));
+        x.p = glm::vec3(glm::mix(glm::dvec3(a.p), glm::dvec3(b.p), s));
         x.p[axis] = limit;
         // Opposite or zero (flat data) end normals blend to nothing: the inside end's then.
-        const glm::dvec3 n = glm::mix(p.n, q.n, s);
+        const glm::dvec3 n = glm::mix(a.n, b.n, s);
         const double length = std::sqrt(glm::dot(n, n));
-        x.n = length > 0 && std::isfinite(length) ? n / length : pin ? p.n : q.n;
+        x.n = length > 0 && std::isfinite(length) ? n / length : a.n;
         x.id = EdgeVertexTable::kMissing;
       }
     }

@@ -31,6 +31,7 @@
 
 namespace isostream {
 
+using extract_internal::ClipVertexIds;
 using extract_internal::Context;
 using extract_internal::CountCurve;
 using extract_internal::Decide;
@@ -370,6 +371,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   // Edge key -> frame vertex of the boundary vertices appended so far: a flat table, where a
   // node-based map spent a malloc and a free per boundary vertex inside the serial join.
   EdgeVertexTable boundary_ids(size_t{1} << 16);
+  ClipVertexIds clipped_ids;  // the same for vertices made by clipping at the data box
   std::vector<uint32_t> to_global;
   std::atomic<bool> halted{false};                 // cancelled, or past the deadline (StopReason)
   std::atomic<bool> recording{retain != nullptr};  // false: the cut was refused room
@@ -425,6 +427,10 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     constexpr uint32_t kUnset = EdgeVertexTable::kMissing;
     to_global.assign(part_vertices, kUnset);
     for (const auto& [local, key] : part.boundary) to_global[local] = boundary_ids.Find(key);
+    for (const auto& [local, key] : part.clipped) {
+      const auto found = clipped_ids.find(key);
+      if (found != clipped_ids.end()) to_global[local] = found->second;
+    }
     // Owned vertices are copied in runs between the (few) reused ones.
     size_t out = m.vertex_count();
     const float* pos = part.positions.data();
@@ -441,6 +447,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
       v = end;
     }
     for (const auto& [local, key] : part.boundary) boundary_ids.FindOrInsert(key, to_global[local]);
+    for (const auto& [local, key] : part.clipped) clipped_ids.try_emplace(key, to_global[local]);
     const size_t first = m.triangle_count();
     const size_t tri_base = m.triangles.size();
     m.triangles.insert(m.triangles.end(), part.triangles.data(),

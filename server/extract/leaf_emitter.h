@@ -67,7 +67,10 @@ class LeafEmitter {
   void BeginSubtree(const Node& root) {
     faces_ =
         RootFaces({Unpack(root.v[0]), Unpack(root.v[1]), Unpack(root.v[2]), Unpack(root.v[3])});
-    if (kEmit) table_->Reset();
+    if (kEmit) {
+      table_->Reset();
+      clip_ids_.clear();
+    }
   }
 
   // Marching tetrahedra on leaf t for the sorted isovalues [first, last) crossing it, components
@@ -452,13 +455,24 @@ class LeafEmitter {
     }
     const int count = ClipToDataBox(c_, poly, 3);
     out_->maybe_unused = true;
+    const bool share = c_.normals == NormalMode::kSmooth;
     for (int i = 0; i < count; ++i) {
       if (poly[i].id != EdgeVertexTable::kMissing) continue;
+      const ClipVertexKey key = ClipVertexKey::Of(poly[i].p, surface);
+      if (share) {
+        const auto [at, made] = clip_ids_.try_emplace(key, out_->vertices);
+        if (!made) {
+          poly[i].id = at->second;  // a triangle beside this one made it
+          continue;
+        }
+        out_->clipped.push_back({out_->vertices, key});
+      }
       poly[i].id = out_->vertices++;
       float* p = out_->positions.Extend(3);
       p[0] = poly[i].p.x, p[1] = poly[i].p.y, p[2] = poly[i].p.z;
+      const glm::vec3 n = share ? ClipNormal(poly[i].p, poly[i].n) : glm::vec3(poly[i].n);
       float* q = out_->normals.Extend(3);
-      q[0] = float(poly[i].n.x), q[1] = float(poly[i].n.y), q[2] = float(poly[i].n.z);
+      q[0] = n.x, q[1] = n.y, q[2] = n.z;
     }
     int emitted = 0;
     for (int i = 1; i + 1 < count; ++i) {
@@ -471,11 +485,37 @@ class LeafEmitter {
     return emitted;
   }
 
+  // The smooth normal of a vertex made by clipping, from its position alone: the grid's central
+  // differences blended trilinearly over the cell holding it. Two triangles can make one such
+  // vertex from different edges (a surface crossing an edge of the box, cut there by both its
+  // faces), and blending along each edge gave each its own normal, so the triangle drawn first
+  // would decide it. Where the differences cancel (flat data): `along`, the blend along the
+  // clipped edge.
+  glm::vec3 ClipNormal(const glm::vec3& pw, const glm::dvec3& along) const {
+    const glm::dvec3 g = (glm::dvec3(pw) - c_.xf.origin) / c_.xf.spacing;
+    const int last = c_.n - 1;
+    glm::ivec3 cell;
+    glm::dvec3 w;
+    for (int a = 0; a < 3; ++a) {
+      cell[a] = std::clamp(int(std::floor(g[a])), 0, last - 1);
+      w[a] = std::clamp(g[a] - cell[a], 0.0, 1.0);
+    }
+    glm::dvec3 sum(0.0);
+    for (int corner = 0; corner < 8; ++corner) {
+      const glm::ivec3 o(corner & 1, (corner >> 1) & 1, corner >> 2);
+      const double weight = (o.x ? w.x : 1 - w.x) * (o.y ? w.y : 1 - w.y) * (o.z ? w.z : 1 - w.z);
+      if (weight != 0) sum += weight * GridGradient<double>(cell + o);
+    }
+    const glm::vec3 n = UnitNormal(sum);
+    return n == glm::vec3(0.0f) ? glm::vec3(along) : n;
+  }
+
   const Context& c_;
   EdgeVertexTable* table_;
   SubtreeMesh* out_;
   CutPart* cut_;
   RootFaces faces_{TetVertices{}};
+  ClipVertexIds clip_ids_;     // this subtree's vertices made by clipping
   GradientFn lazy_ = nullptr;  // set during Leaf for a node without its gradient
   const void* lazy_state_ = nullptr;
 };

@@ -7,14 +7,47 @@
 #pragma once
 
 #include <cstdint>
+#include <cstring>
+#include <glm/vec3.hpp>
 #include <memory>
 #include <mutex>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
 #include "server/extract/append_buffer.h"
 
 namespace isostream::extract_internal {
+
+// Where a vertex made by clipping at the data box is, and for which surface. The triangles
+// beside a clipped edge compute its crossing with a face of the box from the same two ends
+// (ClipToDataBox orders them), so they make the same bits, and its normal is made from the
+// position alone (LeafEmitter::ClipNormal): the vertex is made once (it was made once per
+// triangle, leaving the edges through it open to any check by index).
+struct ClipVertexKey {
+  uint32_t bits[3];  // the position's floats
+  uint32_t surface;
+  static ClipVertexKey Of(const glm::vec3& p, uint8_t surface) {
+    ClipVertexKey k;
+    std::memcpy(&k.bits[0], &p, sizeof(p));
+    k.surface = surface;
+    return k;
+  }
+  bool operator==(const ClipVertexKey& o) const {
+    return bits[0] == o.bits[0] && bits[1] == o.bits[1] && bits[2] == o.bits[2] &&
+           surface == o.surface;
+  }
+};
+struct ClipVertexKeyHash {
+  size_t operator()(const ClipVertexKey& k) const {
+    uint64_t h = k.surface;
+    for (const uint32_t b : k.bits) h = (h ^ b) * 0x9e3779b97f4a7c15ull;
+    return size_t(h ^ (h >> 29));
+  }
+};
+// Clip vertex key -> vertex: per subtree in the emitter, per frame in the join. Node-based:
+// only leaves that straddle the data box make such vertices, a few per thousand.
+using ClipVertexIds = std::unordered_map<ClipVertexKey, uint32_t, ClipVertexKeyHash>;
 
 // A mesh with local vertex indices, plus the vertices that lie on the subtree root's faces
 // (they may be shared with a neighbouring subtree and are merged on append).
@@ -24,6 +57,8 @@ struct SubtreeMesh {
   AppendBuffer<uint32_t> triangles;
   AppendBuffer<uint8_t> surface;
   std::vector<std::pair<uint32_t, uint64_t>> boundary;  // (local vertex, edge key)
+  // The vertices clipping made (local vertex, key): merged with the same ones of other subtrees.
+  std::vector<std::pair<uint32_t, ClipVertexKey>> clipped;
   uint32_t vertices = 0;
   int64_t visited = 0;
   int64_t leaves = 0;
@@ -35,7 +70,7 @@ struct SubtreeMesh {
   size_t capacity_bytes() const {
     return (positions.capacity() + normals.capacity()) * sizeof(float) +
            triangles.capacity() * sizeof(uint32_t) + surface.capacity() +
-           boundary.capacity() * sizeof(boundary[0]);
+           boundary.capacity() * sizeof(boundary[0]) + clipped.capacity() * sizeof(clipped[0]);
   }
   void clear() {
     positions.clear();
@@ -43,6 +78,7 @@ struct SubtreeMesh {
     triangles.clear();
     surface.clear();
     boundary.clear();
+    clipped.clear();
     vertices = 0;
     visited = leaves = 0;
     maybe_unused = false;
@@ -69,6 +105,10 @@ struct SubtreeMesh {
     for (const auto& [local, key] : boundary)
       if (remap[local] != kUnused) boundary[b++] = {remap[local], key};
     boundary.resize(b);
+    size_t c = 0;
+    for (const auto& [local, key] : clipped)
+      if (remap[local] != kUnused) clipped[c++] = {remap[local], key};
+    clipped.resize(c);
     positions.Shrink(3 * size_t(kept));
     normals.Shrink(3 * size_t(kept));
     vertices = kept;
