@@ -88,6 +88,13 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
     for (double& o : offset)
       if (!std::isfinite(o)) o = 0;
   };
+  // Why a set sform or qform was passed over: said beside the placement (`info` shows it), as a
+  // file placed by other fields than its writer meant may lie elsewhere than expected.
+  std::string passed_over;
+  auto placed_by = [&](absl::StatusOr<Orientation> o, const char* by) {
+    if (o.ok() && !passed_over.empty()) o->fallback = passed_over + "; placed by " + by;
+    return o;
+  };
   if (h.I16(kSformCodeOffset) > 0) {
     std::array<std::array<double, 3>, 3> srow;
     for (int r = 0; r < 3; ++r) {
@@ -97,6 +104,7 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
     finite_offset();
     absl::StatusOr<Orientation> o = NearestAxes(srow, offset, dims);
     if (o.ok()) return o;
+    passed_over = "the sform is unusable (" + std::string(o.status().message()) + ")";
   }
   ISOSTREAM_ASSIGN_OR_RETURN(const auto steps, PixdimSteps(h, path));
   if (h.I16(kQformCodeOffset) > 0) {  // its offset stands even if its rotation is damaged
@@ -104,7 +112,8 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
     finite_offset();
   }
   double b = h.F32(kQuaternOffset), c = h.F32(kQuaternOffset + 4), d = h.F32(kQuaternOffset + 8);
-  if (h.I16(kQformCodeOffset) > 0 && std::isfinite(b) && std::isfinite(c) && std::isfinite(d)) {
+  const bool quaternion_finite = std::isfinite(b) && std::isfinite(c) && std::isfinite(d);
+  if (h.I16(kQformCodeOffset) > 0 && quaternion_finite) {
     double a2 = 1 - (b * b + c * c + d * d);
     if (a2 < 1e-7) {  // a 180-degree turn, rounded past the unit sphere: normalise (b, c, d)
       const double norm = std::sqrt(b * b + c * c + d * d);
@@ -121,11 +130,16 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
     for (int r = 0; r < 3; ++r)
       for (int i = 0; i < 3; ++i) q[r][i] = rotation[r][i] * steps[i] * (i == 2 ? qfac : 1);
     absl::StatusOr<Orientation> o = NearestAxes(q, offset, dims);
-    if (o.ok()) return o;
+    if (o.ok()) return placed_by(std::move(o), "the qform");
+    passed_over += std::string(passed_over.empty() ? "" : "; ") + "the qform is unusable (" +
+                   std::string(o.status().message()) + ")";
+  } else if (h.I16(kQformCodeOffset) > 0) {
+    passed_over += std::string(passed_over.empty() ? "" : "; ") +
+                   "the qform is unusable (its quaternion is not finite)";
   }
   std::array<std::array<double, 3>, 3> diagonal{};
   for (int i = 0; i < 3; ++i) diagonal[i][i] = steps[i];
-  absl::StatusOr<Orientation> o = NearestAxes(diagonal, offset, dims);
+  absl::StatusOr<Orientation> o = placed_by(NearestAxes(diagonal, offset, dims), "pixdim");
   if (!o.ok())  // unreachable: positive finite steps on the diagonal
     return absl::InvalidArgumentError(path + ": " + std::string(o.status().message()));
   return o;
@@ -201,8 +215,7 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
     layout.inter = std::isfinite(inter) ? inter : 0.0;
   }
 
-  ISOSTREAM_ASSIGN_OR_RETURN(const Orientation orientation,
-                             FileOrientation(h, layout.dims, path));
+  ISOSTREAM_ASSIGN_OR_RETURN(const Orientation orientation, FileOrientation(h, layout.dims, path));
   // The samples are read as stored, with the file's axes' steps, then turned onto the world's.
   std::array<double, 3> file_spacing;
   for (int a = 0; a < 3; ++a) file_spacing[orientation.source[a]] = orientation.spacing[a];
@@ -218,10 +231,9 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
   ISOSTREAM_RETURN_IF_ERROR(input.Skip(static_cast<size_t>(vox_offset) - kHeaderSize));
 
   std::string grid_name = path.substr(path.find_last_of('/') + 1);
-  ISOSTREAM_ASSIGN_OR_RETURN(
-      VolumePtr stored,
-      ReadSamples(input, layout, spec, grid_name, file_spacing, orientation.origin, stop));
-  if (orientation.identity() && orientation.off_axis_degrees == 0) return stored;
+  ISOSTREAM_ASSIGN_OR_RETURN(VolumePtr stored, ReadSamples(input, layout, spec, grid_name,
+                                                           file_spacing, orientation.origin, stop));
+  if (orientation.Describe().empty()) return stored;
   return Reorient(std::move(stored), orientation);
 }
 

@@ -17,7 +17,7 @@ bool Orientation::identity() const {
 }
 
 std::string Orientation::Describe() const {
-  if (identity() && off_axis_degrees == 0) return "";
+  if (identity() && off_axis_degrees == 0) return fallback;
   std::array<std::string, 3> on;  // per file axis: the world axis it lies along
   for (int a = 0; a < 3; ++a) on[source[a]] = std::string(flip[a] ? "-" : "+") + "xyz"[a];
   std::string text = "file axes i j k on world " + on[0] + " " + on[1] + " " + on[2];
@@ -27,7 +27,7 @@ std::string Orientation::Describe() const {
     text += std::string(" (the nearest axes: the file's grid is rotated ") + angle +
             " degrees off them)";
   }
-  return text;
+  return fallback.empty() ? text : text + "; " + fallback;
 }
 
 absl::StatusOr<Orientation> NearestAxes(const std::array<std::array<double, 3>, 3>& m,

@@ -23,9 +23,13 @@ struct Orientation {
   // The largest angle between a file axis and the world axis it is put on: 0 unless the file's
   // grid is rotated off the world's axes, where positions are then approximate.
   double off_axis_degrees = 0;
+  // Why the file's own choice of placement was passed over, if it was (a NIfTI sform or qform
+  // that is set but unusable): "the sform is unusable (...); placed by the qform".
+  std::string fallback;
 
   bool identity() const;
-  // For Volume::orientation: "" for the identity, else e.g. "file axes i j k on world -x +z +y".
+  // For Volume::orientation: "" for the identity, else e.g. "file axes i j k on world -x +z +y";
+  // then the fallback, if any.
   std::string Describe() const;
 };
 

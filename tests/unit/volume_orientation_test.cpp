@@ -95,9 +95,9 @@ TEST(VolumeOrientation, ObliqueGridTakesTheNearestAxesAndSaysSo) {
   NiftiFile nf;
   const double t = 10 * M_PI / 180;
   nf.sform_code = 1;
-  nf.srow = std::array<std::array<float, 3>, 3>{
-      {{float(std::cos(t)), float(-std::sin(t)), 0}, {float(std::sin(t)), float(std::cos(t)), 0},
-       {0, 0, 1}}};
+  nf.srow = std::array<std::array<float, 3>, 3>{{{float(std::cos(t)), float(-std::sin(t)), 0},
+                                                 {float(std::sin(t)), float(std::cos(t)), 0},
+                                                 {0, 0, 1}}};
   absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "oblique.nii");
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->dims, nf.dims);
@@ -129,14 +129,25 @@ TEST(VolumeOrientation, UnusableSformFallsBack) {
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->spacing, (std::array<double, 3>{2, 2, 2}));
   EXPECT_EQ((*v)->origin, (std::array<double, 3>{1, 2, 3}));
+  // Said, since the writer meant the sform (it was silent).
+  EXPECT_EQ((*v)->orientation,
+            "the sform is unusable (the voxel-to-world matrix has a zero or overflowing column); "
+            "placed by pixdim");
 
   nf.qform_code = 1;
   nf.qfac = -1;
   nf.qoffset = {4, 5, 6};
   v = WriteAndLoad(nf, "zero_sform_qform.nii");
   ASSERT_TRUE(v.ok()) << v.status();
-  EXPECT_EQ((*v)->orientation, "file axes i j k on world +x +y -z");
+  EXPECT_EQ((*v)->orientation,
+            "file axes i j k on world +x +y -z; the sform is unusable (the voxel-to-world matrix "
+            "has a zero or overflowing column); placed by the qform");
   EXPECT_EQ((*v)->origin, (std::array<double, 3>{4, 5, 6 - 2.0 * (nf.dims[2] - 1)}));
+  // A well-formed file says nothing.
+  NiftiFile plain;
+  v = WriteAndLoad(plain, "plain.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->orientation, "");
 }
 
 TEST(VolumeOrientation, NearestAxesRefusesSingularAndNonFiniteMatrices) {
@@ -170,8 +181,8 @@ TEST(VolumeOrientation, VdbReversedAndSwappedAxes) {
       for (int i = -11; i < 2; ++i)
         acc.setValue(openvdb::Coord(i, j, k), float(i * 100 + j * 10 + k));
   // Tiles of 8^3 filling 16^3 at (-32, 16, -8).
-  grid->tree().fill(
-      openvdb::CoordBBox(openvdb::Coord(-32, 16, -8), openvdb::Coord(-17, 31, 7)), 4.0f, true);
+  grid->tree().fill(openvdb::CoordBBox(openvdb::Coord(-32, 16, -8), openvdb::Coord(-17, 31, 7)),
+                    4.0f, true);
   grid->tree().setValue(openvdb::Coord(5, 5, 5), 9.0f);  // the box reaches x = 5: background gap
   const std::string path = WriteVdb("turned.vdb", {grid});
   absl::StatusOr<VolumePtr> v = LoadVolume(path);
@@ -220,7 +231,7 @@ TEST(VolumeOrientation, VdbSparseAndAtTheEndsOfTheIndexRange) {
   absl::StatusOr<VolumePtr> v = LoadVolume(WriteVdb("sparse_turned.vdb", {sparse}));
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->grid->tree().leafCount(), 2u);
-  EXPECT_EQ(Sample(**v, 511, 0, 0), 1.0f);   // world x = 0 is the last sample along x
+  EXPECT_EQ(Sample(**v, 511, 0, 0), 1.0f);  // world x = 0 is the last sample along x
   EXPECT_EQ(Sample(**v, 0, 511, 511), 2.0f);
   EXPECT_EQ(Sample(**v, 511 - 130, 5, 300), 3.0f);  // inside the tile, x reversed
 
