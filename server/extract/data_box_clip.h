@@ -75,7 +75,7 @@ inline glm::vec3 CornerWorld(const Context& c, PackedPoint v) {
 
 // A quad is split along its shorter diagonal (better triangles); equal lengths are broken by
 // position, so the choice does not depend on the tetrahedron's vertex order.
-inline bool QuadSplitsAlong13(const glm::dvec3 p[4]) {
+__attribute__((always_inline)) inline bool QuadSplitsAlong13(const glm::dvec3 p[4]) {
   const double d02 = glm::dot(p[2] - p[0], p[2] - p[0]), d13 = glm::dot(p[3] - p[1], p[3] - p[1]);
   if (d02 != d13) return d13 < d02;
   auto less = [](const glm::dvec3& a, const glm::dvec3& b) {

@@ -20,8 +20,8 @@
 namespace isostream {
 
 struct MarchingTetsCase {
-  uint8_t edge_count = 0;     // 0 (no crossing), 3 (triangle) or 4 (quad, in cyclic order)
-  uint8_t edge[4][2] = {};    // corner pairs (the lone corner first, in a triangle's case)
+  uint8_t edge_count = 0;         // 0 (no crossing), 3 (triangle) or 4 (quad, in cyclic order)
+  uint8_t edge[4][2] = {};        // corner pairs (the lone corner first, in a triangle's case)
   bool flip[2] = {false, false};  // [0]: positively oriented tetrahedron, [1]: negatively
 };
 
@@ -69,8 +69,8 @@ class MarchingTets {
     double f[4];
     for (int i = 0; i < 4; ++i) f[i] = (mask >> i) & 1 ? 1.0 : 0.0;
     const glm::dmat3 e(v[1] - v[0], v[2] - v[0], v[3] - v[0]);
-    const glm::dvec3 g = glm::inverse(glm::transpose(e)) * glm::dvec3(f[1] - f[0], f[2] - f[0],
-                                                                      f[3] - f[0]);
+    const glm::dvec3 g =
+        glm::inverse(glm::transpose(e)) * glm::dvec3(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
     glm::dvec3 p[3];
     for (int i = 0; i < 3; ++i) p[i] = 0.5 * (v[mc.edge[i][0]] + v[mc.edge[i][1]]);
     return glm::dot(glm::cross(p[1] - p[0], p[2] - p[0]), g) > 0;

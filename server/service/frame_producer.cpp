@@ -251,7 +251,8 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   // The deadline bounds extraction and encoding, not delivery: once the mesh is extracted, a
   // client that reads slowly but steadily gets the frame (a 3.6 M-triangle frame read at
   // ~200 KB/s was refused as past the deadline, blaming the server's time), and one that stops
-  // reading is cut by the stall reaper (a write untaken for a frame deadline: chunk_stream.h).
+  // reading is stopped after a deadline without taking a chunk (wait_for_room; the stall reaper
+  // of chunk_stream.h cancels its call then too).
   enum class Room { kYes, kNo, kStop };
   auto room_locked = [&](bool extracting) {
     if (cancel->load()) return Room::kStop;
@@ -263,12 +264,26 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
     return outstanding < size_t(settings_.max_queued_chunks) ? Room::kYes : Room::kNo;
   };
   // Waits until the frame has room for another chunk (or must stop). Polls the sink's queue
-  // on a short period: the sink drains on gRPC's threads, which do not notify this frame.
+  // on a short period: the sink drains on gRPC's threads, which do not notify this frame. A
+  // client that takes no chunk for a whole deadline has stopped reading, and the frame stops:
+  // the daemon's stall reaper cancels such a call too, but nothing else would end this wait.
   auto wait_for_room = [&] {
     std::unique_lock<std::mutex> lock(state.mu);
+    auto taken = [&] { return state.released - std::min(state.released, sink->Queued()); };
+    size_t taken_before = taken();
+    Clock::time_point progress = Clock::now();
     for (;;) {
       const Room room = room_locked(false);
       if (room != Room::kNo) return room == Room::kYes;
+      const Clock::time_point now = Clock::now();
+      if (taken() != taken_before) {
+        taken_before = taken();
+        progress = now;
+      } else if (now - progress > std::chrono::milliseconds(settings_.deadline_ms)) {
+        stop(absl::DeadlineExceededError("the client took no data for " +
+                                         std::to_string(settings_.deadline_ms) + " ms"));
+        return false;
+      }
       state.cv.wait_for(lock, std::chrono::milliseconds(1));
     }
   };
