@@ -35,7 +35,7 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
       // that does not resolve, a TLS mismatch) is a daemon never reached.
       if (m.find("failed to connect") == std::string::npos) {
         for (const char* broke : {"Socket closed", "Connection reset", "Broken pipe", "GOAWAY",
-                                  "shutting down", "stream is broken", "closed the stream"})
+                                  "shutting down", "stream is broken"})
           if (m.find(broke) != std::string::npos)
             return "lost the connection to isostreamd at " + options.address + " (" + m + ")";
       }
@@ -95,8 +95,17 @@ absl::Status FrameAssembler::AddToFrame(const pb::FrameChunk& chunk) {
     return absl::DataLossError("chunk triangle ranges are not contiguous");
   // Counted from the chunk's own header, before anything is decoded (its triangle_count field
   // is checked against the decoded data below).
-  ISOSTREAM_ASSIGN_OR_RETURN(const ChunkHeader header,
-                             ReadChunkHeader(chunk.data().data(), chunk.data().size()));
+  // A chunk the codec refuses is the server's fault, not the caller's argument: DATA_LOSS.
+  auto malformed = [&](const absl::Status& s) {
+    return s.code() == absl::StatusCode::kInvalidArgument
+               ? absl::DataLossError("chunk " + std::to_string(chunk.chunk_index()) +
+                                     " from the server is malformed: " + std::string(s.message()))
+               : s;
+  };
+  const absl::StatusOr<ChunkHeader> read_header =
+      ReadChunkHeader(chunk.data().data(), chunk.data().size());
+  if (!read_header.ok()) return malformed(read_header.status());
+  const ChunkHeader header = *read_header;
   // A small chunk can declare (and expand to) far more than a stream's chunks hold.
   if (header.triangle_count > kMaxStreamChunkTriangles)
     return absl::DataLossError("chunk " + std::to_string(chunk.chunk_index()) + " declares " +
@@ -111,7 +120,9 @@ absl::Status FrameAssembler::AddToFrame(const pb::FrameChunk& chunk) {
   const size_t before = frame_.mesh.triangle_count(), vertices_before = frame_.mesh.vertex_count();
   // The decoder appends nothing when it fails; a check after it takes the chunk back out, so a
   // refused chunk leaves the frame as it was.
-  ISOSTREAM_RETURN_IF_ERROR(DecodeAnyChunk(chunk.data().data(), chunk.data().size(), &frame_.mesh));
+  const absl::Status decoded =
+      DecodeAnyChunk(chunk.data().data(), chunk.data().size(), &frame_.mesh);
+  if (!decoded.ok()) return malformed(decoded);
   auto refuse = [&](const std::string& why) {
     frame_.mesh.positions.resize(3 * vertices_before);
     frame_.mesh.normals.resize(3 * vertices_before);
@@ -291,9 +302,20 @@ absl::StatusOr<Frame> Client::Fetch(const pb::ViewRequest& view,
     if (assembler.complete() && !assembler.frame().coarse) {
       result = assembler.Take();
       have = true;
+      break;
     }
   }
-  ISOSTREAM_RETURN_IF_ERROR(FromGrpc(reader->Finish()));
+  if (have) {
+    // The frame is whole and checked: a server that does not end the call after it must not
+    // turn it into a timeout (it did, after the frame had arrived).
+    context.TryCancel();
+    while (reader->Read(&chunk)) {
+    }
+    const absl::Status ended = FromGrpc(reader->Finish());
+    if (!ended.ok() && ended.code() != absl::StatusCode::kCancelled) return ended;
+  } else {
+    ISOSTREAM_RETURN_IF_ERROR(FromGrpc(reader->Finish()));
+  }
   if (!have) return absl::DataLossError("the stream ended without a complete frame");
   if (result.id != view.request_id())
     return absl::DataLossError("the server answered request " + std::to_string(view.request_id()) +

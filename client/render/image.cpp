@@ -13,15 +13,18 @@
 
 namespace isostream::render {
 
-std::string NumberedPngPath(const std::string& path, int index) {
+std::string NumberedPngPath(const std::string& path, int index, int count) {
   const size_t slash = path.find_last_of('/');
   const size_t dot = path.find_last_of('.');
   const bool has_extension =
       dot != std::string::npos && (slash == std::string::npos || dot > slash);
   const std::string stem = has_extension ? path.substr(0, dot) : path;
   const std::string extension = has_extension ? path.substr(dot) : ".png";
-  char number[16];
-  std::snprintf(number, sizeof(number), "_%03d", index);
+  // As many digits as the last index needs (at least 3): out_999.png sorted after out_1000.png.
+  int digits = 3;
+  for (int last = std::max(count - 1, 0) / 1000; last > 0; last /= 10) ++digits;
+  char number[24];
+  std::snprintf(number, sizeof(number), "_%0*d", digits, index);
   return stem + number + extension;
 }
 
@@ -30,7 +33,7 @@ absl::Status CheckPngOutputs(const std::string& path, int orbit) {
     return absl::InvalidArgumentError("-o writes a PNG image: give a .png path, got '" + path +
                                       "'");
   for (int i = 0; i < std::max(1, orbit); ++i)
-    ISOSTREAM_RETURN_IF_ERROR(CheckOutputPath(orbit > 0 ? NumberedPngPath(path, i) : path));
+    ISOSTREAM_RETURN_IF_ERROR(CheckOutputPath(orbit > 0 ? NumberedPngPath(path, i, orbit) : path));
   return absl::OkStatus();
 }
 namespace {

@@ -27,9 +27,10 @@ absl::Status EncodePng(const Image& image, std::string* out);
 // EncodePng to the file at `path` (created or truncated); I/O failures name the path.
 absl::Status WritePng(const Image& image, const std::string& path);
 
-// The file an image command writes for -o `path` and view `index` of an orbit: the number
-// goes before the extension (out.png -> out_007.png), so an orbit's frames sort in order.
-std::string NumberedPngPath(const std::string& path, int index);
+// The file an image command writes for -o `path` and view `index` of an orbit of `count` views:
+// the number goes before the extension (out.png -> out_007.png), with as many digits as the
+// orbit's last view needs (at least 3), so an orbit's frames sort in order.
+std::string NumberedPngPath(const std::string& path, int index, int count);
 
 // Checks, before any work, that -o `path` names PNG files the command can write: the path
 // itself, or with an orbit of `orbit` views (0: none) each numbered file. InvalidArgument for

@@ -202,7 +202,8 @@ absl::Status Run(const Args& args) {
   for (size_t i = 0; i < cameras.size(); ++i) {
     ISOSTREAM_RETURN_IF_ERROR(renderer->Render(cameras[i]));
     ISOSTREAM_ASSIGN_OR_RETURN(Image image, context->ReadPixels());
-    const std::string path = args.orbit > 0 ? NumberedPngPath(args.output, int(i)) : args.output;
+    const std::string path =
+        args.orbit > 0 ? NumberedPngPath(args.output, int(i), args.orbit) : args.output;
     ISOSTREAM_RETURN_IF_ERROR(WritePng(image, path));
   }
   const double ms =

@@ -138,7 +138,8 @@ absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_
                                        std::to_string(idle_limit.count()) + " s");
   const absl::Status status = session.Finish();
   if (!status.ok()) return status;
-  return absl::UnavailableError("the server closed the stream before the frame was complete");
+  // Ended with OK mid-frame: the server broke the protocol (a daemon that stops says so).
+  return absl::DataLossError("the stream ended without a complete frame");
 }
 
 render::Camera FitToMesh(const render::Camera& unfitted, const OrderedMesh& mesh) {
@@ -192,7 +193,9 @@ int Run(const Args& args) {
   }
   // The files it will write (with --orbit, name_000.png, ...), before any work.
   if (!args.output.empty())
-    if (const absl::Status writable = render::CheckPngOutputs(args.output, args.orbit);
+    // A window writes one screenshot, whatever its orbit.
+    if (const absl::Status writable =
+            render::CheckPngOutputs(args.output, args.window ? 0 : args.orbit);
         !writable.ok())
       return Fail(absl::InvalidArgumentError(writable.message()));  // an argument: exit 2
   int width = 0, height = 0;
@@ -312,6 +315,8 @@ int Run(const Args& args) {
     window.value_range = value_range;
     window.scene_radius = 0.5f * glm::length(hi - lo);
     window.exit_after_frames = args.exit_after_frames;
+    window.orbit = args.orbit;
+    window.timeout_s = args.timeout_s;
     window.screenshot = args.output;
     renderer->reset();  // the window makes its own context and renderer
     context->reset();
@@ -348,7 +353,7 @@ int Run(const Args& args) {
     auto image = (*context)->ReadPixels();
     if (!image.ok()) return Fail(image.status());
     const std::string path =
-        args.orbit > 0 ? render::NumberedPngPath(args.output, int(i)) : args.output;
+        args.orbit > 0 ? render::NumberedPngPath(args.output, int(i), args.orbit) : args.output;
     const absl::Status written = render::WritePng(*image, path);
     if (!written.ok()) return Fail(written);
     std::printf(
@@ -365,8 +370,12 @@ int Run(const Args& args) {
   }
   // Every frame asked for is written: how the stream ends now (a daemon stopping, say) changes
   // nothing the user asked for.
+  // Bounded: a server that never ends the stream held the process after its last PNG.
   (*session)->CloseSend().IgnoreError();
-  (*session)->Finish().IgnoreError();
+  {
+    Watchdog watchdog(**session, std::chrono::seconds(args.timeout_s > 0 ? args.timeout_s : 5));
+    (*session)->Finish().IgnoreError();
+  }
   return 0;
 }
 
@@ -404,11 +413,13 @@ int main(int argc, char** argv) {
                "[ ] isovalues, R reset, Q quit");
   auto* exit_after =
       app.add_option("--exit-after", args.exit_after_frames,
-                     "with --window: close after N refined frames, writing -o as a screenshot")
+                     "with --window: close after N refined frames, writing -o as a screenshot "
+                     "(frames after the first come from moves, or from --orbit)")
           ->check(CLI::Range(1, 1 << 30));
   app.add_option("--timeout-s", args.timeout_s,
-                 "headless: fail after this many seconds without an answer or data from the "
-                 "server, connecting included (default 60; 0: wait forever)")
+                 "headless, or --window with --exit-after: fail after this many seconds without "
+                 "an answer or data from the server, connecting included (default 60; 0: wait "
+                 "forever)")
       ->check(CLI::Range(0, 86400));
   try {
     app.parse(argc, argv);

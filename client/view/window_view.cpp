@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <deque>
 #include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
 #include <mutex>
 #include <thread>
 
@@ -223,6 +224,8 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
   net::FrameAssembler assembler(client.options().max_frame_triangles);
   bool frame_open = false;
   bool awaiting_frame = false;  // a view was sent and its refined frame is not complete
+  using Clock = std::chrono::steady_clock;
+  Clock::time_point last_data = Clock::now();  // a chunk arrived, or a view was sent
   int refined_frames = 0;
   absl::Status result;
   render::Camera camera = options.camera;
@@ -235,8 +238,21 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
         state = options.state;
         input.reset = false;
       }
-      for (; input.eps_steps > 0; --input.eps_steps) state.eps *= 0.5;
-      for (; input.eps_steps < 0; ++input.eps_steps) state.eps *= 2.0;
+      // Finer (+) or coarser (-): a budget doubles or halves, an eps halves or doubles, and an
+      // eps of 0 (the finest) starts coarsening from a thousandth of the values' range (the
+      // keys did nothing to a budget, and 0 stayed 0).
+      for (; input.eps_steps > 0; --input.eps_steps) {
+        if (state.budget > 0)
+          state.budget = std::min<int64_t>(state.budget * 2, int64_t{1} << 40);
+        else
+          state.eps *= 0.5;
+      }
+      for (; input.eps_steps < 0; ++input.eps_steps) {
+        if (state.budget > 0)
+          state.budget = std::max<int64_t>(state.budget / 2, 1);
+        else
+          state.eps = state.eps > 0 ? state.eps * 2.0 : options.value_range / 1024;
+      }
       for (double& v : state.isovalues) v += 0.01 * options.value_range * input.iso_steps;
       input.iso_steps = 0;
       camera.eye = input.orbit.Eye();
@@ -249,6 +265,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
         result = connection.Send(MakeViewRequest(state, camera, palette, ++request_id));
       if (!result.ok()) break;
       awaiting_frame = true;
+      last_data = Clock::now();
       input.changed = false;
     }
     Inbox& inbox = connection.inbox();
@@ -257,6 +274,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       while (!inbox.chunks.empty() && result.ok()) {
         ::isostream::v1::FrameChunk chunk = std::move(inbox.chunks.front());
         inbox.chunks.pop_front();
+        last_data = Clock::now();
         if (chunk.frame_id() != request_id) continue;  // superseded by a newer view
         result = AddAndUpload(assembler, chunk, **renderer, &frame_open);
         if (!result.ok()) break;
@@ -264,7 +282,13 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
         if (assembler.complete()) {
           result = (*renderer)->EndFrame();
           frame_open = false;
-          if (!f.coarse) ++refined_frames, awaiting_frame = false;
+          if (!f.coarse) {
+            ++refined_frames, awaiting_frame = false;
+            if (options.orbit > 0 && refined_frames < options.orbit) {  // the next view of the turn
+              input.orbit.yaw += 2.0f * glm::pi<float>() / float(options.orbit);
+              input.changed = true;
+            }
+          }
           std::snprintf(title, sizeof(title), "isostream-view  %s  eps %s  %lld triangles  %s",
                         state.volume.c_str(), ShortestText(f.stats.eps_used()).c_str(),
                         (long long)f.mesh.triangle_count(), f.coarse ? "(coarse)" : "");
@@ -273,6 +297,12 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       }
     }
     if (!result.ok()) break;
+    if (options.exit_after_frames > 0 && options.timeout_s > 0 && awaiting_frame &&
+        Clock::now() - last_data > std::chrono::seconds(options.timeout_s)) {
+      result = absl::DeadlineExceededError("no data from the server for " +
+                                           std::to_string(options.timeout_s) + " s");
+      break;
+    }
     if (connection.open() && inbox.ended && inbox.chunks.empty()) {
       result = connection.Finished();
       // The daemon ends an idle session (no view, no frame in flight) with DEADLINE_EXCEEDED,

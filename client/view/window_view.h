@@ -23,6 +23,13 @@ struct WindowOptions {
   // screenshot of the last one to `screenshot` (if not empty). 0: run until closed.
   int exit_after_frames = 0;
   std::string screenshot;
+  // Turn the view by 1/orbit of a full turn about the vertical after each refined frame, until
+  // `orbit` views are drawn (0: only the user moves it): a scripted run of --exit-after N > 1
+  // otherwise never got past its first frame.
+  int orbit = 0;
+  // With exit_after_frames: fail after this long without data while a frame is awaited (0:
+  // never), as the headless viewer does, so a stalled daemon cannot hold a script.
+  int timeout_s = 0;
 };
 
 // Unavailable with a clear message when no window can be opened (no display, no GL 3.3).

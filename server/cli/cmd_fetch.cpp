@@ -9,6 +9,7 @@
 #include "server/cli/commands.h"
 #include "shared/file_io.h"
 #include "shared/frame_notes.h"
+#include "shared/mesh_weld.h"
 #include "shared/number_list.h"
 #include "shared/ply_io.h"
 
@@ -106,6 +107,8 @@ int RunFetch(const FetchArgs& args) {
 
   auto frame = (*client)->Fetch(ToViewRequest(*request, args));
   if (!frame.ok()) return fail(net::ExplainCallError(frame.status(), options), 1);
+  // One vertex per place, as extract writes: each chunk carried its own copy of its seams'.
+  WeldIdenticalVertices(&frame->mesh);
   const absl::Status written = WritePly(frame->mesh, args.output);
   if (!written.ok()) return fail(std::string(written.message()), 1);
   if (args.stats) {

@@ -47,7 +47,9 @@ int PrintCountsByEps(const PreparedVolume& prepared, ExtractRequest r,
     // Past 99% of the full-resolution count the octaves add little: that count closes.
     if (code == 0 || 100 * (*counts)[code] >= 99 * full) break;
   }
-  if (code != 0) std::printf("  %-16s  %lld\n", "0", (long long)full);
+  // Closed by eps 0's count, unless no eps has any triangle (the one row says it all: the
+  // closing row repeated it).
+  if (code != 0 && full != 0) std::printf("  %-16s  %lld\n", "0", (long long)full);
   return 0;
 }
 

@@ -55,8 +55,8 @@ TEST(NoPreloadDaemon, VolumeInfoOfATurnedNiftiFile) {
   nf.sform_offset = {10, 20, 30};
   const std::string path = dir.path() + "/turned.nii";
   volume_files::WriteBytes(
-      path, volume_files::Concat(nf.Header(), volume_files::Samples(volume_files::Type::kFloat32,
-                                                                    nf.dims, false)));
+      path, volume_files::Concat(
+                nf.Header(), volume_files::Samples(volume_files::Type::kFloat32, nf.dims, false)));
   DaemonProcess daemon;
   ASSERT_TRUE(daemon.Start({"--volume", "turned=" + path, "--no-preload", "--no-cache"},
                            dir.path() + "/isostreamd.log"));

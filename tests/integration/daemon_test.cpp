@@ -245,6 +245,9 @@ TEST_F(Daemon, FetchCommandWritesTheFrame) {
                         DirectRequest(0.002, glm::dvec3(2.5, 1.8, 3.1)));
   ASSERT_TRUE(direct.ok());
   ExpectSameFrame(direct->mesh, *mesh, 0.0f);
+  // One vertex per place, as the extractor's mesh has: the chunks' copies of their seams'
+  // vertices are one again (the PLY was open along the seams by index).
+  EXPECT_EQ(mesh->vertex_count(), direct->mesh.vertex_count());
 
   const std::string bad = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
                           daemon_->address() + " --volume /etc/passwd --iso 0.1 --eps 0.01 -o " +

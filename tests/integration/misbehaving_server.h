@@ -19,11 +19,12 @@
 namespace isostream::testing {
 
 enum class Misbehaviour {
-  kTwoDims,       // GetVolumeInfo describes the volume with 2 dims
-  kStall,         // Session reads the view and then sends nothing
-  kEndlessFrame,  // Session answers the view with chunks of one frame that never ends
-  kSilentInfo,    // GetVolumeInfo never answers
-  kFrameThenGone,  // Session answers the view with a whole frame, then ends UNAVAILABLE
+  kTwoDims,          // GetVolumeInfo describes the volume with 2 dims
+  kStall,            // Session reads the view and then sends nothing
+  kEndlessFrame,     // Session answers the view with chunks of one frame that never ends
+  kSilentInfo,       // GetVolumeInfo never answers
+  kFrameThenGone,    // Session answers the view with a whole frame, then ends UNAVAILABLE
+  kFrameThenSilent,  // Session and Extract answer with a whole frame, then never end the call
 };
 
 class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
@@ -69,18 +70,15 @@ class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
                                                 ::isostream::v1::ViewRequest>* stream) override {
     ::isostream::v1::ViewRequest view;
     if (!stream->Read(&view)) return grpc::Status::OK;
-    if (how_ == Misbehaviour::kFrameThenGone) {
-      const OrderedMesh strip = Strip(kTrianglesPerChunk);
+    if (how_ == Misbehaviour::kFrameThenGone || how_ == Misbehaviour::kFrameThenSilent) {
       ::isostream::v1::FrameChunk chunk;
-      if (!EncodeChunkRaw(strip, 0, strip.triangle_count(), chunk.mutable_data()).ok())
+      if (!WholeFrame(view.request_id(), &chunk))
         return grpc::Status(grpc::StatusCode::INTERNAL, "cannot encode the test chunk");
-      chunk.set_frame_id(view.request_id());
-      chunk.set_last(true);
-      chunk.set_chunk_count(1);
-      chunk.set_triangle_count(kTrianglesPerChunk);
-      chunk.mutable_stats()->set_triangles(kTrianglesPerChunk);
       stream->Write(chunk);
-      return grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down");
+      if (how_ == Misbehaviour::kFrameThenGone)
+        return grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down");
+      WaitForTheClientToLeave(context);
+      return grpc::Status(grpc::StatusCode::CANCELLED, "silent");
     }
     if (how_ == Misbehaviour::kEndlessFrame) {
       std::string data;
@@ -103,7 +101,31 @@ class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
     return grpc::Status(grpc::StatusCode::CANCELLED, "stalled");
   }
 
+  grpc::Status Extract(grpc::ServerContext* context, const ::isostream::v1::ViewRequest* view,
+                       grpc::ServerWriter<::isostream::v1::FrameChunk>* writer) override {
+    if (how_ != Misbehaviour::kFrameThenSilent)
+      return grpc::Status(grpc::StatusCode::UNIMPLEMENTED, "not in this test");
+    ::isostream::v1::FrameChunk chunk;
+    if (!WholeFrame(view->request_id(), &chunk))
+      return grpc::Status(grpc::StatusCode::INTERNAL, "cannot encode the test chunk");
+    writer->Write(chunk);
+    WaitForTheClientToLeave(context);
+    return grpc::Status(grpc::StatusCode::CANCELLED, "silent");
+  }
+
  private:
+  // A whole frame of one chunk, answering `request_id`.
+  static bool WholeFrame(uint64_t request_id, ::isostream::v1::FrameChunk* chunk) {
+    const OrderedMesh strip = Strip(kTrianglesPerChunk);
+    if (!EncodeChunkRaw(strip, 0, strip.triangle_count(), chunk->mutable_data()).ok()) return false;
+    chunk->set_frame_id(request_id);
+    chunk->set_last(true);
+    chunk->set_chunk_count(1);
+    chunk->set_triangle_count(kTrianglesPerChunk);
+    chunk->mutable_stats()->set_triangles(kTrianglesPerChunk);
+    return true;
+  }
+
   // Silence until the client leaves (or the test ends, or a minute passes).
   void WaitForTheClientToLeave(grpc::ServerContext* context) const {
     const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);

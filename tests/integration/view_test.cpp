@@ -3,6 +3,7 @@
 // chunk bytes) give a clear error and a non-zero exit.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -119,18 +120,18 @@ TEST(View, DrawsFromStraightAboveAndBelow) {
   ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
   for (const char* eye : {"0,5,0", "0,-3,0"}) {
     const std::string png = dir.path() + "/top.png";
-    const ViewRun run = View("--server " + daemon.address() +
-                             " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 --eye " + eye +
-                             " -o " + png);
+    const ViewRun run =
+        View("--server " + daemon.address() +
+             " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 --eye " + eye + " -o " + png);
     ASSERT_EQ(run.code, 0) << eye << "\n" << run.output;
     auto image = render::ReadPng(png);
     ASSERT_TRUE(image.ok()) << image.status();
     EXPECT_GT(Coverage(*image), 0.05) << eye;
   }
   // A budget under the coarsest mesh is said to be exceeded (it was drawn silently).
-  const ViewRun over = View("--server " + daemon.address() +
-                            " --volume cayley:33 --iso 0 --budget 1 --size 64x64 -o " + dir.path() +
-                            "/over.png");
+  const ViewRun over =
+      View("--server " + daemon.address() +
+           " --volume cayley:33 --iso 0 --budget 1 --size 64x64 -o " + dir.path() + "/over.png");
   EXPECT_EQ(over.code, 0) << over.output;
   EXPECT_NE(over.output.find("over the budget of 1"), std::string::npos) << over.output;
   EXPECT_EQ(daemon.Stop(), 0);
@@ -275,6 +276,49 @@ TEST(View, WindowZoomedOutStillShowsTheSurfaces) {
   auto image = render::ReadPng(png);
   ASSERT_TRUE(image.ok()) << image.status();
   EXPECT_GT(Coverage(*image), 0.01);  // nothing was drawn
+}
+
+// --window --orbit N turns the view after each frame, so a script's --exit-after N closes it by
+// itself (only one view was ever sent: it waited for moves until killed). The views after the
+// first are re-ordered from the retained mesh.
+TEST(View, WindowOrbitsToItsExitAfterCount) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "xvfb-run is not installed (scripts/install-deps.sh installs it)";
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
+  const std::string png = dir.path() + "/turned.png";
+  const testing::CommandResult run = testing::RunCommand(
+      "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' " + std::string(ISOSTREAM_VIEW_PATH) +
+      " --server " + daemon.address() +
+      " --volume buckyball:65 --iso 0.15 --eps 0.01 --size 160x120 --window --orbit 3"
+      " --exit-after 3 -o " +
+      png);
+  ASSERT_EQ(run.code, 0) << run.output;
+  EXPECT_TRUE(render::ReadPng(png).ok());
+  EXPECT_EQ(StatsOf(daemon).frames_reordered(), 2);
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
+// '+' refines a --budget view: the budget doubles (the keys changed only eps, which a budget
+// view never sends, so the same mesh came back, re-ordered).
+TEST(View, WindowPlusDoublesABudget) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1 && command -v xdotool > /dev/null 2>&1") !=
+      0)
+    GTEST_SKIP() << "xvfb-run or xdotool is not installed (scripts/install-deps.sh installs them)";
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
+  const testing::CommandResult run = WindowWithInput(
+      daemon,
+      "--volume buckyball:65 --iso 0.15 --budget 3000 --size 160x120 --window --exit-after 2 -o " +
+          dir.path() + "/finer.png",
+      "key equal");
+  ASSERT_EQ(run.code, 0) << run.output;
+  const auto stats = StatsOf(daemon);
+  EXPECT_GE(stats.frames_sent(), 2);
+  EXPECT_EQ(stats.frames_reordered(), 0) << "the second view drew the first one's mesh";
+  EXPECT_EQ(daemon.Stop(), 0);
 }
 
 // The daemon closes a session that sent no view for --idle-timeout-s; the window keeps its
@@ -442,6 +486,28 @@ TEST(View, AFrameWrittenIsASuccessHoweverTheStreamEnds) {
   EXPECT_TRUE(std::filesystem::exists(png));
 }
 
+// A server that never ends the call after a whole frame holds neither client: the viewer
+// writes its PNG and exits within --timeout-s (it drained the stream for ever), and fetch
+// writes the frame (it failed with its own timeout after the frame had arrived).
+TEST(View, AServerThatNeverEndsTheCallAfterTheFrameHoldsNoClient) {
+  testing::ScratchDir dir;
+  testing::MisbehavingServer server(testing::Misbehaviour::kFrameThenSilent);
+  ASSERT_TRUE(server.ok());
+  const auto t0 = std::chrono::steady_clock::now();
+  const ViewRun r = View("--server " + server.address() +
+                         " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 --timeout-s 2 -o " +
+                         dir.path() + "/frame.png");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(std::filesystem::exists(dir.path() + "/frame.png"));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(20));
+  const testing::CommandResult fetched = testing::RunCommand(
+      std::string(ISOSTREAM_CLI_PATH) + " fetch --server " + server.address() +
+      " --volume sphere:33 --iso 0.5 --eps 0.01 --eye 2,2,2 --codec raw --timeout-s 2 -o " +
+      dir.path() + "/frame.ply");
+  EXPECT_EQ(fetched.code, 0) << fetched.output;
+  EXPECT_NE(fetched.output.find("100 triangles"), std::string::npos) << fetched.output;
+}
+
 // Arguments it cannot honour are refused before any frame is asked for: an image it would not
 // write as named, a window option without a window, an eye too far away to draw from.
 TEST(View, ArgumentsItCannotHonourAreRefusedBeforeAnyFrame) {
@@ -478,7 +544,9 @@ TEST(View, CorruptChunkBytesAreAnErrorNotACrash) {
   chunk.set_triangle_count(100);
   chunk.set_data(std::string("ISC1 this is not a chunk at all \x01\x02\x03", 36));
   const absl::Status status = assembler.Add(chunk);
-  EXPECT_FALSE(status.ok());
+  // The server's fault: DATA_LOSS (exit 1), not INVALID_ARGUMENT (the viewer's usage-error 2).
+  EXPECT_EQ(status.code(), absl::StatusCode::kDataLoss) << status;
+  EXPECT_NE(status.message().find("from the server is malformed"), std::string::npos) << status;
   EXPECT_FALSE(assembler.complete());
 }
 

@@ -103,5 +103,15 @@ TEST(MeanAbsoluteDifferenceTest, ZeroOneAndMismatch) {
   EXPECT_LT(MeanAbsoluteDifference(black, Pattern(5, 6)), 0.0);
 }
 
+// An orbit's numbered files sort in view order: as many digits as its last view needs (out_999
+// sorted after out_1000 in a listing or a glob).
+TEST(NumberedPngPathTest, DigitsFollowTheOrbitsLength) {
+  EXPECT_EQ(NumberedPngPath("o.png", 7, 3), "o_007.png");
+  EXPECT_EQ(NumberedPngPath("o.png", 999, 1000), "o_999.png");
+  EXPECT_EQ(NumberedPngPath("o.png", 7, 1001), "o_0007.png");
+  EXPECT_EQ(NumberedPngPath("o.png", 1000, 1001), "o_1000.png");
+  EXPECT_EQ(NumberedPngPath("dir.v2/o", 12, 12000), "dir.v2/o_00012.png");
+}
+
 }  // namespace
 }  // namespace isostream::render

@@ -323,6 +323,11 @@ TEST(Cli, InfoPrintsTheTriangleCountByEps) {
     ASSERT_TRUE(redone.ok()) << redone.status();
     EXPECT_EQ((long long)redone->triangle_count(), count) << "eps " << printed;
   }
+  // No triangle at any eps: one row (a closing "0  0" repeated it).
+  const CliRun none = Cli("info --volume buckyball:33 --iso 5 --no-cache");
+  ASSERT_EQ(none.code, 0) << none.output;
+  const std::string none_rows = none.output.substr(none.output.find("  eps"));
+  EXPECT_EQ(std::count(none_rows.begin(), none_rows.end(), '\n'), 2) << none.output;
   const CliRun bad = Cli("info --volume buckyball:33 --iso 0.05,x --no-cache");
   EXPECT_EQ(bad.code, 2);
   EXPECT_NE(bad.output.find("'x' is not a number"), std::string::npos) << bad.output;

@@ -1,0 +1,36 @@
+#include "shared/mesh_weld.h"
+
+#include <absl/container/flat_hash_map.h>
+
+#include <array>
+#include <cstring>
+
+namespace isostream {
+
+size_t WeldIdenticalVertices(OrderedMesh* mesh) {
+  using Key = std::array<uint32_t, 6>;  // the position's and the normal's float bits
+  const size_t n = mesh->vertex_count();
+  absl::flat_hash_map<Key, uint32_t> first;
+  first.reserve(n);
+  std::vector<uint32_t> to(n);
+  size_t kept = 0;
+  for (size_t v = 0; v < n; ++v) {
+    Key key;
+    std::memcpy(&key[0], &mesh->positions[3 * v], 3 * sizeof(float));
+    std::memcpy(&key[3], &mesh->normals[3 * v], 3 * sizeof(float));
+    const auto [at, fresh] = first.try_emplace(key, uint32_t(kept));
+    to[v] = at->second;
+    if (!fresh) continue;
+    for (int a = 0; a < 3; ++a) {
+      mesh->positions[3 * kept + a] = mesh->positions[3 * v + a];
+      mesh->normals[3 * kept + a] = mesh->normals[3 * v + a];
+    }
+    ++kept;
+  }
+  for (uint32_t& i : mesh->triangles) i = to[i];
+  mesh->positions.resize(3 * kept);
+  mesh->normals.resize(3 * kept);
+  return n - kept;
+}
+
+}  // namespace isostream
