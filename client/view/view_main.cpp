@@ -396,7 +396,8 @@ int main(int argc, char** argv) {
   auto* budget = app.add_option("--budget", args.budget, "triangle budget")
                      ->transform(isostream::GivenCount());
   eps->excludes(budget);
-  app.add_option("--eye", args.eye, "perspective eye x,y,z (default: framing the volume)");
+  app.add_option("--eye", args.eye, "perspective eye x,y,z (default: framing the volume)")
+      ->check(given_number);  // given but empty: an error, as fetch says, not the default view
   app.add_option("--size", args.size, "image size WxH (default 800x800)");
   app.add_option("-o,--output", args.output, "PNG to write (with --orbit: name_000.png, ...)");
   app.add_option("--orbit", args.orbit, "write N views on a full turn around the volume")

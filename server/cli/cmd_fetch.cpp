@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "absl/strings/match.h"
 #include "client/net/session_client.h"
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
@@ -71,10 +72,17 @@ int RunFetch(const FetchArgs& args) {
     std::cerr << "isostream fetch: " << m << "\n";
     return code;
   };
-  if (args.output.size() < 4 || args.output.compare(args.output.size() - 4, 4, ".ply") != 0)
+  if (!absl::EndsWithIgnoreCase(args.output, ".ply"))  // as extract and the viewer take names
     return fail("-o must end in .ply, got '" + args.output + "'", 2);
   if (const absl::Status writable = CheckOutputPath(args.output); !writable.ok())
     return fail(std::string(writable.message()), 2);
+  // The view's flags, as extract checks them, before any call (a zero --view-dir came back as
+  // the server's refusal, exit 1, where extract exits 2 for it).
+  {
+    const auto early = MakeRequest(args.view, Volume{});
+    const absl::Status valid = early.ok() ? ValidateRequest(*early) : early.status();
+    if (!valid.ok()) return fail(std::string(valid.message()), 2);
+  }
   net::ClientOptions options;
   options.address = args.server;
   options.token = args.token;

@@ -521,6 +521,7 @@ TEST(View, ArgumentsItCannotHonourAreRefusedBeforeAnyFrame) {
       {"/frame.jpg", "give a .png path"},
       {"/frame.png --eps ''", "a number is needed"},
       {"/frame.png --iso ''", "--iso: a number is needed"},  // not the default isovalues
+      {"/frame.png --eye ''", "--eye: a number is needed"},  // not the default view
       {"/frame.png --exit-after 2", "--window"},
       {"/frame.png --eye 1e30,0,0", "too far"}};
   for (const auto& [args, reason] : refused) {

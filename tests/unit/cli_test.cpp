@@ -155,6 +155,18 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
     EXPECT_EQ(r.code, 2) << server;
     EXPECT_NE(r.output.find("'" + server + "' is not HOST:PORT"), std::string::npos) << r.output;
   }
+  // The view's flags are checked before any call, as extract checks them (a zero --view-dir came
+  // back as the server's refusal, exit 1); an output named .PLY is taken, as extract takes it.
+  const CliRun zero_dir =
+      Cli("fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 "
+          "--view-dir 0,0,0 -o " +
+          out);
+  EXPECT_EQ(zero_dir.code, 2) << zero_dir.output;
+  EXPECT_NE(zero_dir.output.find("view direction"), std::string::npos) << zero_dir.output;
+  const CliRun upper = Cli("fetch --server 127.0.0.1:1 --volume sphere:17 --iso 0.5 --eps 0 -o " +
+                           TempPath("cli-upper.PLY"));
+  EXPECT_EQ(upper.code, 1) << upper.output;  // past the name: nothing listens there
+  EXPECT_NE(upper.output.find("cannot reach"), std::string::npos) << upper.output;
   // Outputs that cannot be written are refused before the volume is prepared (cayley:4097
   // would take minutes and 270 GB), not after the frame was extracted.
   const std::string folder_named_ply = TempPath("cli-folder.ply");
