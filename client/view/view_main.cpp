@@ -153,10 +153,10 @@ render::Camera FitToMesh(const render::Camera& unfitted, const OrderedMesh& mesh
   }
   const glm::vec3 center = 0.5f * (lo + hi);
   const float distance = glm::length(camera.eye - center);
-  // At least a ten-thousandth of the distance: a frame whose vertices all fall on one point
+  // At least a millionth of the distance: a frame whose vertices all fall on one point
   // (a single bright voxel's surface, 26 vertices in one place) left near and far equal in
   // single precision, and the frame could not be drawn.
-  const float radius = std::max(0.5f * glm::length(hi - lo), 1e-4f * distance);
+  const float radius = std::max(0.5f * glm::length(hi - lo), 1e-6f * distance);
   if (distance <= radius * 1.05f) return camera;  // eye inside: keep the volume framing
   if (camera.projection == render::Projection::kPerspective) {
     camera.target = center;

@@ -118,7 +118,9 @@ TEST(View, DrawsFromStraightAboveAndBelow) {
   testing::ScratchDir dir;
   testing::DaemonProcess daemon;
   ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
-  for (const char* eye : {"0,5,0", "0,-3,0"}) {
+  // And from far away: the mesh is framed as from near (an eye 1e6 away framed a sphere of a
+  // ten-thousandth of its distance, and drew nothing).
+  for (const char* eye : {"0,5,0", "0,-3,0", "1e6,0,0"}) {
     const std::string png = dir.path() + "/top.png";
     const ViewRun run =
         View("--server " + daemon.address() +
