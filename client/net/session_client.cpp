@@ -132,6 +132,11 @@ absl::Status FrameAssembler::AddToFrame(const pb::FrameChunk& chunk) {
   };
   if (frame_.mesh.triangle_count() - before != chunk.triangle_count())
     return refuse("chunk triangle count does not match its data");
+  // Only a frame's last chunk may be empty (an empty frame): empty chunks without end would
+  // be a frame that never completes nor grows.
+  if (chunk.triangle_count() == 0 && !chunk.last())
+    return refuse("chunk " + std::to_string(chunk.chunk_index()) +
+                  " is empty and not its frame's last");
   if (chunk.last()) {
     // The last chunk says how many chunks and triangles the frame has: a stream that ends it
     // early must not pass for the whole frame.

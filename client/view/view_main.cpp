@@ -121,8 +121,10 @@ absl::StatusOr<net::Frame> ReceiveFrame(net::Session& session, uint64_t request_
   bool frame_open = false;
   Watchdog watchdog(session, idle_limit);
   while (session.Read(&chunk)) {
-    watchdog.Touch();
+    // Only this view's chunks are progress: a server sending others' for ever (or an older
+    // view's frame that never ends) kept the watchdog quiet past --timeout-s.
     if (chunk.frame_id() != request_id) continue;  // an older view's frame, superseded
+    watchdog.Touch();
     ISOSTREAM_RETURN_IF_ERROR(AddAndUpload(assembler, chunk, renderer, &frame_open));
     if (!assembler.complete()) continue;
     ISOSTREAM_RETURN_IF_ERROR(renderer.EndFrame());

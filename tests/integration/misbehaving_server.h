@@ -25,6 +25,7 @@ enum class Misbehaviour {
   kSilentInfo,       // GetVolumeInfo never answers
   kFrameThenGone,    // Session answers the view with a whole frame, then ends UNAVAILABLE
   kFrameThenSilent,  // Session and Extract answer with a whole frame, then never end the call
+  kOtherFrames,      // Session answers the view with chunks of another frame, paced, without end
 };
 
 class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
@@ -79,6 +80,17 @@ class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
         return grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down");
       WaitForTheClientToLeave(context);
       return grpc::Status(grpc::StatusCode::CANCELLED, "silent");
+    }
+    if (how_ == Misbehaviour::kOtherFrames) {
+      ::isostream::v1::FrameChunk chunk;
+      if (!WholeFrame(view.request_id() + 1000, &chunk))
+        return grpc::Status(grpc::StatusCode::INTERNAL, "cannot encode the test chunk");
+      for (int i = 0; i < kMaxChunks && !context->IsCancelled() && !stop_; ++i) {
+        if (!stream->Write(chunk)) break;
+        ++chunks_sent_;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      }
+      return grpc::Status::OK;
     }
     if (how_ == Misbehaviour::kEndlessFrame) {
       std::string data;

@@ -552,6 +552,21 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   EXPECT_EQ(refused_at, sink.chunks_.size());  // the last chunk, before decoding it
   EXPECT_EQ(limited.frame().mesh.triangle_count(), next - sink.chunks_.back().triangle_count());
 
+  // Only the last chunk may be empty: empty chunks without end are a frame that never completes
+  // nor grows (the viewer waited on them for ever).
+  {
+    ::isostream::v1::FrameChunk empty;
+    ASSERT_TRUE(EncodeChunkRaw(OrderedMesh{}, 0, 0, empty.mutable_data()).ok());
+    empty.set_frame_id(sink.chunks_[0].frame_id());
+    net::FrameAssembler endless;
+    EXPECT_EQ(endless.Add(empty).code(), absl::StatusCode::kDataLoss);
+    empty.set_last(true);
+    empty.set_chunk_count(1);
+    net::FrameAssembler empty_frame;
+    EXPECT_TRUE(empty_frame.Add(empty).ok());
+    EXPECT_TRUE(empty_frame.complete());
+  }
+
   // A refused chunk leaves the frame as it was: a chunk whose field miscounts its data, then the
   // right one, give the frame once (the first had been decoded into it before the check).
   net::FrameAssembler careful;

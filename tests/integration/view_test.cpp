@@ -25,9 +25,10 @@ namespace {
 
 using ViewRun = testing::CommandResult;
 
-ViewRun View(const std::string& args, bool no_display = false) {
+// `whole_command`: args is the command line itself (to wrap the viewer in timeout, say).
+ViewRun View(const std::string& args, bool no_display = false, bool whole_command = false) {
   return testing::RunCommand(std::string(no_display ? "env -u DISPLAY -u WAYLAND_DISPLAY " : "") +
-                             ISOSTREAM_VIEW_PATH + " " + args);
+                             (whole_command ? "" : std::string(ISOSTREAM_VIEW_PATH) + " ") + args);
 }
 
 // The viewer draws on the renderer's default background.
@@ -508,6 +509,25 @@ TEST(View, AServerThatNeverEndsTheCallAfterTheFrameHoldsNoClient) {
       dir.path() + "/frame.ply");
   EXPECT_EQ(fetched.code, 0) << fetched.output;
   EXPECT_NE(fetched.output.find("100 triangles"), std::string::npos) << fetched.output;
+}
+
+// --timeout-s counts only this view's chunks as progress: a server streaming other frames'
+// without end kept the viewer waiting as long as it streamed.
+TEST(View, OtherFramesChunksDoNotKeepTheTimeoutQuiet) {
+  testing::ScratchDir dir;
+  testing::MisbehavingServer server(testing::Misbehaviour::kOtherFrames);
+  ASSERT_TRUE(server.ok());
+  const auto t0 = std::chrono::steady_clock::now();
+  const ViewRun r =
+      View("timeout 60 " + std::string(ISOSTREAM_VIEW_PATH) + " --server " + server.address() +
+               " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 --timeout-s 2"
+               " -o " +
+               dir.path() + "/never.png",
+           false, true);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("no data from the server for 2 s"), std::string::npos) << r.output;
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(20));
+  EXPECT_GT(server.chunks_sent(), 10);  // it did stream meanwhile
 }
 
 // Arguments it cannot honour are refused before any frame is asked for: an image it would not
