@@ -4,12 +4,19 @@
 // any check by index, where the extractor's mesh is closed.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
 #include "shared/ordered_mesh.h"
 
 namespace isostream {
 
-// Makes vertices with bit-identical positions and normals one (the first keeps its index
-// order; the triangles and their order are unchanged). Returns how many vertices went.
-size_t WeldIdenticalVertices(OrderedMesh* mesh);
+// Makes a vertex one with a bit-identical vertex (position and normal) of an earlier part, never
+// of its own: parts are the vertex ranges starting at `part_first_vertex` (ascending; a
+// chunk's vertices are distinct even where quantization made two alike, and merging those made
+// triangles with a repeated corner). The kept vertices keep their order; the triangles and
+// their order are unchanged. Returns how many vertices went.
+size_t WeldIdenticalVertices(OrderedMesh* mesh, const std::vector<uint32_t>& part_first_vertex);
 
 }  // namespace isostream

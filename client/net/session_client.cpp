@@ -154,6 +154,7 @@ absl::Status FrameAssembler::AddToFrame(const pb::FrameChunk& chunk) {
   ++next_chunk_;
   ++frame_.chunks;
   frame_.bytes += int64_t(chunk.data().size());
+  frame_.chunk_first_vertex.push_back(uint32_t(vertices_before));
   return absl::OkStatus();
 }
 

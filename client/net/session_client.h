@@ -11,6 +11,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "proto/isostream.grpc.pb.h"
 #include "shared/ordered_mesh.h"
@@ -57,6 +58,9 @@ struct Frame {
   pb::FrameStats stats;  // from the last chunk
   int chunks = 0;
   int64_t bytes = 0;  // encoded bytes received
+  // The first vertex of each chunk's in `mesh` (chunks carry their own copies of the vertices
+  // on their seams: WeldIdenticalVertices merges those across chunks).
+  std::vector<uint32_t> chunk_first_vertex;
 };
 
 // Puts chunks back together and checks that they arrive as the contract says: in chunk order,

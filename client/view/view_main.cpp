@@ -411,9 +411,10 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
   app.add_option("--codec", args.codec, "draco (default) or raw")
       ->check(CLI::IsMember({"draco", "raw"}));
-  app.add_flag("--window", args.window,
-               "interactive window (needs a display): drag to orbit, wheel to zoom, +/- eps, "
-               "[ ] isovalues, R reset, Q quit");
+  app.add_flag(
+      "--window", args.window,
+      "interactive window (needs a display): drag to orbit, wheel to zoom, +/- finer/coarser, "
+      "[ ] isovalues, R reset, Q quit");
   auto* exit_after =
       app.add_option("--exit-after", args.exit_after_frames,
                      "with --window: close after N refined frames, writing -o as a screenshot "

@@ -242,8 +242,10 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       // eps of 0 (the finest) starts coarsening from a thousandth of the values' range (the
       // keys did nothing to a budget, and 0 stayed 0).
       for (; input.eps_steps > 0; --input.eps_steps) {
+        constexpr int64_t kMostBudget = int64_t{1} << 40;  // far past any daemon's frame limit
         if (state.budget > 0)
-          state.budget = std::min<int64_t>(state.budget * 2, int64_t{1} << 40);
+          state.budget = state.budget >= kMostBudget / 2 ? std::max(state.budget, kMostBudget)
+                                                         : 2 * state.budget;
         else
           state.eps *= 0.5;
       }
@@ -274,8 +276,8 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       while (!inbox.chunks.empty() && result.ok()) {
         ::isostream::v1::FrameChunk chunk = std::move(inbox.chunks.front());
         inbox.chunks.pop_front();
-        last_data = Clock::now();
         if (chunk.frame_id() != request_id) continue;  // superseded by a newer view
+        last_data = Clock::now();                      // only this view's chunks are progress
         result = AddAndUpload(assembler, chunk, **renderer, &frame_open);
         if (!result.ok()) break;
         const net::Frame& f = assembler.frame();
@@ -284,7 +286,9 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
           frame_open = false;
           if (!f.coarse) {
             ++refined_frames, awaiting_frame = false;
-            if (options.orbit > 0 && refined_frames < options.orbit) {  // the next view of the turn
+            // The next view of the turn; a script's --exit-after past the orbit goes on turning.
+            const int views = std::max(options.orbit, options.exit_after_frames);
+            if (options.orbit > 0 && refined_frames < views) {
               input.orbit.yaw += 2.0f * glm::pi<float>() / float(options.orbit);
               input.changed = true;
             }

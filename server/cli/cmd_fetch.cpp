@@ -115,8 +115,10 @@ int RunFetch(const FetchArgs& args) {
 
   auto frame = (*client)->Fetch(ToViewRequest(*request, args));
   if (!frame.ok()) return fail(net::ExplainCallError(frame.status(), options), 1);
-  // One vertex per place, as extract writes: each chunk carried its own copy of its seams'.
-  WeldIdenticalVertices(&frame->mesh);
+  // Smooth normals share vertices, as extract writes them: each chunk carried its own copy of
+  // its seams'. (Flat ones are not shared by the extractor either.)
+  if (request->normals == NormalMode::kSmooth)
+    WeldIdenticalVertices(&frame->mesh, frame->chunk_first_vertex);
   const absl::Status written = WritePly(frame->mesh, args.output);
   if (!written.ok()) return fail(std::string(written.message()), 1);
   if (args.stats) {

@@ -215,8 +215,8 @@ int main(int argc, char** argv) {
   auto* o_iso =
       app.add_option("--max-isovalues", max_isovalues, "isovalues per request (default 16)");
   auto* o_deadline = app.add_option("--deadline-ms", deadline_ms,
-                                    "time limit per frame's extraction and encoding (default "
-                                    "30000); a client that takes no data for this long is cut off");
+                                    "time limit per frame's extraction (default 30000); a "
+                                    "client that takes no data for this long is cut off");
   auto* o_idle = app.add_option("--idle-timeout-s", idle_timeout_s,
                                 "end a Session with no request and no frame in flight for this "
                                 "many seconds (default 300; 0: never)");

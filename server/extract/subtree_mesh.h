@@ -74,7 +74,9 @@ struct SubtreeMesh {
   size_t capacity_bytes() const {
     return (positions.capacity() + normals.capacity()) * sizeof(float) +
            triangles.capacity() * sizeof(uint32_t) + surface.capacity() +
-           boundary.capacity() * sizeof(boundary[0]) + clipped.capacity() * sizeof(clipped[0]);
+           boundary.capacity() * sizeof(boundary[0]) + clipped.capacity() * sizeof(clipped[0]) +
+           clip_ids.bucket_count() * sizeof(void*) +
+           clip_ids.size() * (sizeof(ClipVertexIds::value_type) + 2 * sizeof(void*));
   }
   void clear() {
     positions.clear();

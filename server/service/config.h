@@ -14,7 +14,7 @@ struct Limits {
   int max_sessions = 16;              // concurrent Session and Extract streams
   int64_t max_triangles = 4'000'000;  // per frame
   int max_isovalues = 16;
-  int64_t deadline_ms = 30'000;  // per frame, extraction and encoding
+  int64_t deadline_ms = 30'000;  // per frame's extraction; also a client's longest silence
   int max_dim = 257;             // samples per axis of a generator served without a catalogue
   // Memory for the generated volumes held at once (their hierarchy stores: 105 MiB at 257^3,
   // 6.1 GiB at 1025^3); catalogue.h says how it is kept.

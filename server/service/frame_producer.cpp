@@ -6,6 +6,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <utility>
 #include <vector>
 
 namespace isostream::service {
@@ -84,6 +85,10 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
                                 Clock::time_point received, Clock::time_point deadline_from,
                                 CoarseHint* hint, RetainedFrame* retained) const {
   const RetainedCut* same_mesh = retained ? retained->Find(volume, request) : nullptr;
+  // The refined frame's deadline starts after the coarse frame has gone out: delivering that is
+  // the client's pace, not this frame's extraction (a client slow to take a coarse frame of
+  // many chunks made the refined one miss its deadline).
+  Clock::time_point refined_from = deadline_from;
   if (view.progressive() && same_mesh == nullptr) {
     // Never over the frame limit: a coarse budget past it refused a progressive view as if
     // even the coarsest mesh were over the limit.
@@ -113,6 +118,7 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
       ExtractStats stats;
       ISOSTREAM_RETURN_IF_ERROR(ProduceFrame(volume, view, c, true, generation, cancel, sink,
                                              received, deadline_from, &stats));
+      refined_from = std::max(deadline_from, Clock::now());
       if (hint) {
         hint->volume = view.volume();
         hint->isovalues = request.isovalues;
@@ -124,7 +130,7 @@ absl::Status FrameProducer::Run(const ServedVolume& volume, const pb::ViewReques
   }
   ExtractStats stats;
   return ProduceFrame(volume, view, request, false, generation, cancel, sink, received,
-                      deadline_from, &stats, retained, same_mesh);
+                      refined_from, &stats, retained, same_mesh);
 }
 
 absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::ViewRequest& view,
@@ -248,7 +254,7 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
 
   // Whether the frame has room for another chunk now: kNo while the client has not taken
   // enough of the queued ones, kStop once the frame must stop. Called with state.mu held.
-  // The deadline bounds extraction and encoding, not delivery: once the mesh is extracted, a
+  // The deadline bounds the extraction, not delivery: once the mesh is extracted, a
   // client that reads slowly but steadily gets the frame (a 3.6 M-triangle frame read at
   // ~200 KB/s was refused as past the deadline, blaming the server's time), and one that stops
   // reading is stopped after a deadline without taking a chunk (wait_for_room; the stall reaper
@@ -269,15 +275,20 @@ absl::Status FrameProducer::ProduceFrame(const ServedVolume& volume, const pb::V
   // the daemon's stall reaper cancels such a call too, but nothing else would end this wait.
   auto wait_for_room = [&] {
     std::unique_lock<std::mutex> lock(state.mu);
-    auto taken = [&] { return state.released - std::min(state.released, sink->Queued()); };
-    size_t taken_before = taken();
+    // Progress: a chunk taken by the client, or one finished by the encoders (which the
+    // client cannot take before: a busy encoder pool is not the client's stall).
+    auto marker = [&] {
+      const size_t taken = state.released - std::min(state.released, sink->Queued());
+      return std::pair<size_t, size_t>(taken, state.released);
+    };
+    std::pair<size_t, size_t> marker_before = marker();
     Clock::time_point progress = Clock::now();
     for (;;) {
       const Room room = room_locked(false);
       if (room != Room::kNo) return room == Room::kYes;
       const Clock::time_point now = Clock::now();
-      if (taken() != taken_before) {
-        taken_before = taken();
+      if (marker() != marker_before) {
+        marker_before = marker();
         progress = now;
       } else if (now - progress > std::chrono::milliseconds(settings_.deadline_ms)) {
         stop(absl::DeadlineExceededError("the client took no data for " +

@@ -62,7 +62,8 @@ bool ServiceCore::Authorized(const grpc::CallbackServerContext* ctx) const {
           return a == std::tolower(static_cast<unsigned char>(b));
         }))
       continue;
-    const std::string_view token = given.substr(kScheme.size());
+    std::string_view token = given.substr(kScheme.size());
+    while (!token.empty() && token.front() == ' ') token.remove_prefix(1);  // 1*SP
     // Constant time in the token's content, so timing does not reveal a matching prefix.
     unsigned diff = token.size() != config.token.size();
     for (size_t i = 0; i < std::min(token.size(), config.token.size()); ++i)

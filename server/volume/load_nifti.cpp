@@ -139,7 +139,8 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
   }
   std::array<std::array<double, 3>, 3> diagonal{};
   for (int i = 0; i < 3; ++i) diagonal[i][i] = steps[i];
-  absl::StatusOr<Orientation> o = placed_by(NearestAxes(diagonal, offset, dims), "pixdim");
+  absl::StatusOr<Orientation> o =
+      placed_by(NearestAxes(diagonal, offset, dims), "pixdim's steps at the header's offset");
   if (!o.ok())  // unreachable: positive finite steps on the diagonal
     return absl::InvalidArgumentError(path + ": " + std::string(o.status().message()));
   return o;

@@ -65,6 +65,7 @@ TEST_F(GuardedDaemon, TokenIsRequired) {
     return stub->GetServerStats(&context, request, &stats).error_code();
   };
   EXPECT_EQ(stats_with({"bearer s3cret"}), grpc::StatusCode::OK);
+  EXPECT_EQ(stats_with({"Bearer   s3cret"}), grpc::StatusCode::OK);  // 1*SP
   EXPECT_EQ(stats_with({"BEARER s3cret"}), grpc::StatusCode::OK);
   EXPECT_EQ(stats_with({"Basic abc", "Bearer s3cret"}), grpc::StatusCode::OK);
   EXPECT_EQ(stats_with({"Bearer S3cret"}), grpc::StatusCode::UNAUTHENTICATED);

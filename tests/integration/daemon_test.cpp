@@ -248,6 +248,20 @@ TEST_F(Daemon, FetchCommandWritesTheFrame) {
   // One vertex per place, as the extractor's mesh has: the chunks' copies of their seams'
   // vertices are one again (the PLY was open along the seams by index).
   EXPECT_EQ(mesh->vertex_count(), direct->mesh.vertex_count());
+  // With Draco, vertices of one chunk that quantize alike stay apart (merging them made
+  // triangles with a repeated corner).
+  const std::string draco =
+      std::string(ISOSTREAM_CLI_PATH) + " fetch --server " + daemon_->address() +
+      " --volume cayley:40 --iso 0 --eps 0.05 --eye 2.5,1.8,3.1 -o " + out + " 2>/dev/null";
+  ASSERT_EQ(std::system(draco.c_str()), 0);
+  auto drawn = ReadPly(out);
+  ASSERT_TRUE(drawn.ok()) << drawn.status();
+  size_t repeated = 0;
+  for (size_t t = 0; t < drawn->triangle_count(); ++t) {
+    const uint32_t* c = &drawn->triangles[3 * t];
+    repeated += c[0] == c[1] || c[1] == c[2] || c[0] == c[2];
+  }
+  EXPECT_EQ(repeated, 0u);
 
   const std::string bad = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
                           daemon_->address() + " --volume /etc/passwd --iso 0.1 --eps 0.01 -o " +

@@ -440,6 +440,72 @@ absl::Status ProduceIntoStuckSink(int chunk, int queued, int deadline_ms,
   return producer.Run(**volume, view, *request, 1, &cancel, sink, now, now);
 }
 
+// Takes its first `slow` chunks one per 100 ms from the first push, the rest at once: a client
+// slow but steady through a progressive view's coarse frame.
+class SlowStartSink : public ChunkSink {
+ public:
+  explicit SlowStartSink(size_t slow) : slow_(slow) {}
+  bool Push(uint64_t, ::isostream::v1::FrameChunk&& chunk) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (chunks_.empty()) first_ = std::chrono::steady_clock::now();
+    chunks_.push_back(std::move(chunk));
+    return true;
+  }
+  size_t Queued() const override {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (chunks_.empty()) return 0;
+    const auto taken =
+        size_t((std::chrono::steady_clock::now() - first_) / std::chrono::milliseconds(100));
+    const size_t held = std::min(chunks_.size(), slow_);
+    return held > taken ? held - taken : 0;
+  }
+  std::vector<::isostream::v1::FrameChunk> chunks_;
+
+ private:
+  const size_t slow_;
+  mutable std::mutex mu_;
+  std::chrono::steady_clock::time_point first_;
+};
+
+// A progressive view's refined frame has its own deadline, from when the coarse frame has gone
+// out: a client taking the coarse frame's chunks slowly (~2 s here, past the 500 ms deadline,
+// but never silent for one) had the refined frame fail at once.
+TEST(FrameProducer, TheRefinedFrameIsNotChargedForTheCoarseFramesDelivery) {
+  FrameSettings settings;
+  settings.chunk_triangles = settings.first_chunk_triangles = 256;
+  settings.max_queued_chunks = 2;
+  settings.coarse_triangles = 5000;
+  settings.deadline_ms = 500;
+  CatalogueOptions o;
+  VolumeCatalogue catalogue(o);
+  auto volume = catalogue.Get("buckyball:65");
+  ASSERT_TRUE(volume.ok());
+  WorkerPool pool(2);
+  ServerCounters counters;
+  FrameProducer producer(settings, &pool, &counters);
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  for (float iso : {0.05f, 0.15f, 0.25f}) view.add_surfaces()->set_isovalue(iso);
+  view.set_eps(0.002);
+  view.set_progressive(true);
+  view.set_codec(::isostream::v1::RAW);
+  view.mutable_camera()->mutable_eye()->set_x(3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok());
+  SlowStartSink sink(20);
+  std::atomic<bool> cancel{false};
+  const auto now = std::chrono::steady_clock::now();
+  const absl::Status s =
+      producer.Run(**volume, view, *request, 1, &cancel, &sink, now, now, nullptr, nullptr);
+  EXPECT_TRUE(s.ok()) << s;
+  ASSERT_FALSE(sink.chunks_.empty());
+  EXPECT_TRUE(sink.chunks_.front().coarse());
+  EXPECT_GT(std::chrono::steady_clock::now() - now, std::chrono::milliseconds(1000))
+      << "the coarse frame went out quickly: nothing tested";
+  EXPECT_FALSE(sink.chunks_.back().coarse());
+  EXPECT_TRUE(sink.chunks_.back().last());
+}
+
 TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
   StuckSink sink;
   const absl::Status s = ProduceIntoStuckSink(2048, 4, 300, {0.05f, 0.15f}, 0.002, 2, &sink);

@@ -132,7 +132,7 @@ TEST(VolumeOrientation, UnusableSformFallsBack) {
   // Said, since the writer meant the sform (it was silent).
   EXPECT_EQ((*v)->orientation,
             "the sform is unusable (the voxel-to-world matrix has a zero or overflowing column); "
-            "placed by pixdim");
+            "placed by pixdim's steps at the header's offset");
 
   nf.qform_code = 1;
   nf.qfac = -1;
