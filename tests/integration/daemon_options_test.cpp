@@ -727,7 +727,7 @@ TEST_F(StalledClientDaemon, AClientThatStopsReadingLosesItsSlot) {
 }
 
 // A client that reads steadily but slowly gets the whole frame, even when its delivery takes
-// longer than the frame deadline (2 s here): the deadline bounds extraction and encoding. A
+// longer than the frame deadline (2 s here): the deadline bounds the extraction. A
 // 3.6 M-triangle frame read at ~200 KB/s was refused as past the deadline.
 TEST_F(StalledClientDaemon, ASlowReaderGetsTheWholeFrame) {
   using Clock = std::chrono::steady_clock;
