@@ -410,6 +410,22 @@ class StuckSink : public ChunkSink {
   mutable std::mutex mu_;
 };
 
+// A frame producer with `settings` and `encoders` encoding threads, and buckyball:65 from a
+// catalogue of its own to produce frames of.
+struct ProducerRig {
+  ProducerRig(const FrameSettings& settings, int encoders)
+      : catalogue(CatalogueOptions{}), pool(encoders), producer(settings, &pool, &counters) {
+    auto got = catalogue.Get("buckyball:65");
+    EXPECT_TRUE(got.ok()) << got.status();
+    if (got.ok()) volume = *got;
+  }
+  VolumeCatalogue catalogue;
+  WorkerPool pool;
+  ServerCounters counters;
+  FrameProducer producer;
+  ServedVolumePtr volume;  // null if it could not be prepared
+};
+
 // Produces one frame of buckyball:65 (isovalues `isos`, `eps`, the eye at x = 3) in chunks of
 // `chunk` triangles, at most `queued` held, with a deadline of `deadline_ms` and `encoders`
 // encoding threads, into `sink`, which never drains.
@@ -421,13 +437,8 @@ absl::Status ProduceIntoStuckSink(int chunk, int queued, int deadline_ms,
   settings.first_chunk_triangles = chunk;
   settings.max_queued_chunks = queued;
   settings.deadline_ms = deadline_ms;
-  CatalogueOptions o;
-  VolumeCatalogue catalogue(o);
-  auto volume = catalogue.Get("buckyball:65");
-  if (!volume.ok()) return volume.status();
-  WorkerPool pool(encoders);
-  ServerCounters counters;
-  FrameProducer producer(settings, &pool, &counters);
+  ProducerRig rig(settings, encoders);
+  if (!rig.volume) return absl::InternalError("buckyball:65 could not be prepared");
   ::isostream::v1::ViewRequest view;
   view.set_volume("buckyball:65");
   for (float iso : isos) view.add_surfaces()->set_isovalue(iso);
@@ -437,7 +448,7 @@ absl::Status ProduceIntoStuckSink(int chunk, int queued, int deadline_ms,
   if (!request.ok()) return request.status();
   std::atomic<bool> cancel{false};
   const auto now = std::chrono::steady_clock::now();
-  return producer.Run(**volume, view, *request, 1, &cancel, sink, now, now);
+  return rig.producer.Run(*rig.volume, view, *request, 1, &cancel, sink, now, now);
 }
 
 // Takes its first `slow` chunks one per 100 ms from the first push, the rest at once: a client
@@ -476,13 +487,8 @@ TEST(FrameProducer, TheRefinedFrameIsNotChargedForTheCoarseFramesDelivery) {
   settings.max_queued_chunks = 2;
   settings.coarse_triangles = 5000;
   settings.deadline_ms = 500;
-  CatalogueOptions o;
-  VolumeCatalogue catalogue(o);
-  auto volume = catalogue.Get("buckyball:65");
-  ASSERT_TRUE(volume.ok());
-  WorkerPool pool(2);
-  ServerCounters counters;
-  FrameProducer producer(settings, &pool, &counters);
+  ProducerRig rig(settings, 2);
+  ASSERT_TRUE(rig.volume);
   ::isostream::v1::ViewRequest view;
   view.set_volume("buckyball:65");
   for (float iso : {0.05f, 0.15f, 0.25f}) view.add_surfaces()->set_isovalue(iso);
@@ -495,8 +501,7 @@ TEST(FrameProducer, TheRefinedFrameIsNotChargedForTheCoarseFramesDelivery) {
   SlowStartSink sink(20);
   std::atomic<bool> cancel{false};
   const auto now = std::chrono::steady_clock::now();
-  const absl::Status s =
-      producer.Run(**volume, view, *request, 1, &cancel, &sink, now, now, nullptr, nullptr);
+  const absl::Status s = rig.producer.Run(*rig.volume, view, *request, 1, &cancel, &sink, now, now);
   EXPECT_TRUE(s.ok()) << s;
   ASSERT_FALSE(sink.chunks_.empty());
   EXPECT_TRUE(sink.chunks_.front().coarse());
@@ -543,17 +548,12 @@ TEST(FrameProducer, AStuckClientLeavesTheSharedWorkersFree) {
 }
 
 TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
-  CatalogueOptions o;
-  VolumeCatalogue catalogue(o);
-  auto volume = catalogue.Get("buckyball:65");
-  ASSERT_TRUE(volume.ok());
-  WorkerPool encoders(2);
-  ServerCounters counters;
   FrameSettings settings;
   settings.first_chunk_triangles = 1000;
   settings.chunk_triangles = 7000;
   settings.max_queued_chunks = 1000;
-  FrameProducer producer(settings, &encoders, &counters);
+  ProducerRig rig(settings, 2);
+  ASSERT_TRUE(rig.volume);
   ::isostream::v1::ViewRequest view;
   view.set_volume("buckyball:65");
   view.add_surfaces()->set_isovalue(0.1f);
@@ -564,9 +564,9 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   std::atomic<bool> cancel{false};
   StuckSink sink;
   const auto now = std::chrono::steady_clock::now();
-  ASSERT_TRUE(producer.Run(**volume, view, *request, 1, &cancel, &sink, now, now).ok());
+  ASSERT_TRUE(rig.producer.Run(*rig.volume, view, *request, 1, &cancel, &sink, now, now).ok());
   auto direct =
-      Extract(*(*volume)->prepared.hierarchy, (*volume)->prepared.grid_to_world, *request);
+      Extract(*rig.volume->prepared.hierarchy, rig.volume->prepared.grid_to_world, *request);
   ASSERT_TRUE(direct.ok());
   ASSERT_GT(sink.chunks_.size(), 4u);
   uint64_t next = 0;
@@ -582,7 +582,7 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   }
   EXPECT_EQ(next, direct->mesh.triangle_count());
   EXPECT_EQ(sink.chunks_.back().stats().triangles(), int64_t(next));
-  EXPECT_EQ(counters.frames_started.load(), 1);
+  EXPECT_EQ(rig.counters.frames_started.load(), 1);
 
   // The client puts them back together; a frame whose last chunk comes early, or whose last
   // chunk's counts disagree with what arrived, is DATA_LOSS, not a smaller frame.
