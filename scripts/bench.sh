@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# Runs the benchmarks whose figures BENCHMARKS.md records. Run on an otherwise idle machine.
+# Runs the benchmark programs whose figures BENCHMARKS.md records (the daemon's memory scripts,
+# tests/bench/daemon_*.sh, start daemons of their own and are run by hand). Run on an otherwise
+# idle machine.
 #   ./scripts/bench.sh [build-dir]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 B=${1:-build}
+"$B/tests/bench/bench_load" --benchmark_counters_tabular=true
 "$B/tests/bench/bench_hierarchy" --benchmark_counters_tabular=true
 "$B/tests/bench/bench_extract" --benchmark_counters_tabular=true
 "$B/tests/bench/bench_memory" --benchmark_counters_tabular=true

@@ -32,6 +32,8 @@ done
 port=$(grep -m1 -oE "listening on [0-9.]+:[0-9]+" "$log" | sed 's/.*://' || true)
 [ -n "$port" ] || { cat "$log"; echo "isostreamd did not start"; exit 1; }
 echo "isostreamd on 127.0.0.1:$port"
+# A failure the server explains in its log (not to the client) is shown before the log goes.
 "$BUILD_DIR"/client/view/isostream-view --server "127.0.0.1:$port" --volume "$VOLUME" --iso "$ISO" \
-  --eps 0.005 --eye "$EYE" --size 800x800 -o out/buckyball.png
+  --eps 0.005 --eye "$EYE" --size 800x800 -o out/buckyball.png \
+  || { echo "isostream-view failed; isostreamd's log:"; cat "$log"; exit 1; }
 echo "wrote out/buckyball.png"

@@ -11,6 +11,8 @@ PACKAGES=(
   libdraco-dev libembree-dev libglm-dev
   # headless GL through EGL on Mesa (llvmpipe needs no GPU and no X server)
   libegl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri libgl-dev
+  # libOpenGL.so, which CMake's OpenGL::OpenGL needs: nothing above pulls it in on a fresh system
+  libopengl-dev
   # the viewer's --window mode (GLFW), and a virtual X server to test it headless
   libglfw3-dev xvfb xauth xdotool
   # transport
@@ -35,6 +37,11 @@ done
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PACKAGES[@]} packages present"
   exit 0
+fi
+if [ -n "$SUDO" ] && ! command -v sudo > /dev/null 2>&1; then
+  echo "install-deps: not root and no sudo here: run this script as root, or install:" >&2
+  echo "  ${missing[*]}" >&2
+  exit 1
 fi
 echo "install-deps: installing ${missing[*]}"
 # Through env: sudo resets the environment, and a debconf question would wait for an answer.

@@ -292,11 +292,11 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
     QuantizationFor(*volume->prepared.volume, &volume->box, &volume->position_bits);
     volume->position_error = PositionErrorBound(volume->box, volume->position_bits);
     spdlog::info(
-        "prepared volume '{}': {}x{}x{}, hierarchy {} in {:.0f} ms, {} position bits", name,
+        "prepared volume '{}': {}x{}x{} in {:.0f} ms (hierarchy cache: {}), {} position bits", name,
         volume->prepared.volume->dims[0], volume->prepared.volume->dims[1],
-        volume->prepared.volume->dims[2], CacheOutcomeName(volume->prepared.cache),
+        volume->prepared.volume->dims[2],
         1e3 * (volume->prepared.load_s + volume->prepared.pad_s + volume->prepared.hierarchy_s),
-        volume->position_bits);
+        CacheOutcomeName(volume->prepared.cache), volume->position_bits);
     // A cache the daemon cannot write to rebuilds every hierarchy at every start: say so.
     const std::string& note = volume->prepared.cache_note;
     if (note.find("not stored") != std::string::npos)

@@ -1,7 +1,9 @@
 #include "server/service/config.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -139,7 +141,8 @@ absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
   if (std::filesystem::is_directory(path, ec))
     return absl::InvalidArgumentError("config file '" + path + "' is a directory");
   std::ifstream in(path);
-  if (!in) return absl::NotFoundError("cannot open config file '" + path + "'");
+  if (!in)  // why, too: a service's user may lack the permission an admin's shell has
+    return absl::NotFoundError("cannot open config file '" + path + "': " + std::strerror(errno));
   std::stringstream text;
   text << in.rdbuf();
   // A key given twice in one object would silently keep its last value: refused, named.

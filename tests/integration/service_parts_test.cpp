@@ -233,6 +233,10 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
   ScratchDir dir;
   const absl::Status folder = LoadConfigFile(dir.path(), &c);
   EXPECT_NE(folder.message().find("is a directory"), std::string::npos) << folder;
+  // A file it cannot open is named with the reason (a service's user may lack the permission).
+  const absl::Status missing = LoadConfigFile(dir.path() + "/none.json", &c);
+  EXPECT_NE(missing.message().find("none.json': No such file or directory"), std::string::npos)
+      << missing;
 }
 
 // The example deploy/ ships names every key with a valid value.
