@@ -14,6 +14,14 @@ struct CommandResult {
   std::string output;
 };
 
+// `text` as one shell word: a build directory under a path with spaces broke the commands the
+// tests run.
+inline std::string ShellQuote(const std::string& text) {
+  std::string quoted = "'";
+  for (const char c : text) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return quoted + "'";
+}
+
 inline CommandResult RunCommand(const std::string& command) {
   CommandResult r;
   FILE* p = popen((command + " 2>&1").c_str(), "r");

@@ -35,7 +35,8 @@ cleanup() {
 trap cleanup EXIT
 
 # 1-2. The unit as installed, but starting the built binary (verify wants it to exist).
-sed "s|^ExecStart=/usr/local/bin/isostreamd|ExecStart=$daemon|" "$unit" >"$work/isostreamd.service"
+# Quoted: systemd splits an unquoted path at its spaces.
+sed "s|^ExecStart=/usr/local/bin/isostreamd|ExecStart=\"$daemon\"|" "$unit" >"$work/isostreamd.service"
 systemd-analyze verify "$work/isostreamd.service"
 if ! systemd-analyze security --offline=true --threshold=20 "$work/isostreamd.service" \
   >"$work/security"; then

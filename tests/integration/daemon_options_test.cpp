@@ -109,7 +109,8 @@ TEST_F(GuardedDaemon, BudgetOverTheTriangleLimitIsTheLimit) {
   EXPECT_GT(frame->stats.eps_used(), 0.0);
   // The CLI says why the mesh is coarser than the budget asked for.
   const testing::CommandResult fetched = testing::RunCommand(
-      std::string(ISOSTREAM_CLI_PATH) + " fetch --server " + daemon_->address() +
+      ::isostream::testing::ShellQuote(ISOSTREAM_CLI_PATH) + " fetch --server " +
+      daemon_->address() +
       " --token s3cret --volume buckyball:65 --iso 0.05,0.15,0.25 --budget 1e9 --stats -o " +
       scratch_->path() + "/limited.ply");
   EXPECT_EQ(fetched.code, 0) << fetched.output;
@@ -551,7 +552,8 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
       {"--bogus", "--bogus"}};
   for (const auto& [flags, reason] : refused) {
     const CommandResult r =
-        RunCommand(std::string("timeout 20 ") + ISOSTREAMD_PATH + " --no-cache " + flags);
+        RunCommand(std::string("timeout 20 ") + ::isostream::testing::ShellQuote(ISOSTREAMD_PATH) +
+                   " --no-cache " + flags);
     EXPECT_EQ(r.code, 2) << flags << "\n" << r.output;
     EXPECT_NE(r.output.find(reason), std::string::npos) << flags << "\n" << r.output;
   }
@@ -634,8 +636,9 @@ TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
   ScratchDir dir;
   DaemonProcess first;
   ASSERT_TRUE(first.Start({"--no-cache"}, dir.path() + "/first.log"));
-  CommandResult r = RunCommand(std::string("timeout 20 ") + ISOSTREAMD_PATH +
-                               " --no-cache --listen " + first.address());
+  CommandResult r =
+      RunCommand(std::string("timeout 20 ") + ::isostream::testing::ShellQuote(ISOSTREAMD_PATH) +
+                 " --no-cache --listen " + first.address());
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("cannot listen on " + first.address() + ": the port is in use"),
             std::string::npos)
@@ -646,7 +649,8 @@ TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
   EXPECT_EQ(first.Stop(SIGTERM), 0);
   // An address of no interface here (TEST-NET-1: binding it sends nothing) is told apart from
   // a busy port: both were "the port is in use, or the address is not this machine's".
-  r = RunCommand(std::string("timeout 20 ") + ISOSTREAMD_PATH + " --no-cache --listen 192.0.2.1:0");
+  r = RunCommand(std::string("timeout 20 ") + ::isostream::testing::ShellQuote(ISOSTREAMD_PATH) +
+                 " --no-cache --listen 192.0.2.1:0");
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("cannot listen on 192.0.2.1:0: the address is not this machine's"),
             std::string::npos)
@@ -656,8 +660,9 @@ TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
   { std::ofstream(junk) << "not a certificate\n"; }
   std::string key, cert;
   const bool have_pair = MakeTestCertificate(dir.path(), &key, &cert);
-  const std::string base =
-      std::string("timeout 20 ") + ISOSTREAMD_PATH + " --no-cache --listen 127.0.0.1:0 ";
+  const std::string base = std::string("timeout 20 ") +
+                           ::isostream::testing::ShellQuote(ISOSTREAMD_PATH) +
+                           " --no-cache --listen 127.0.0.1:0 ";
   r = RunCommand(base + "--tls-cert " + junk + " --tls-key " + (have_pair ? key : junk));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("TLS certificate '" + junk + "' holds no PEM certificate"),

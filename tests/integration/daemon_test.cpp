@@ -232,8 +232,8 @@ TEST_F(Daemon, BudgetViewsAreReorderedToo) {
 
 TEST_F(Daemon, FetchCommandWritesTheFrame) {
   const std::string out = scratch_->path() + "/fetched.ply";
-  const std::string cmd = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
-                          daemon_->address() +
+  const std::string cmd = ::isostream::testing::ShellQuote(ISOSTREAM_CLI_PATH) +
+                          " fetch --server " + daemon_->address() +
                           " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.002 --eye "
                           "2.5,1.8,3.1 --codec raw -o " +
                           out + " 2>/dev/null";
@@ -250,9 +250,10 @@ TEST_F(Daemon, FetchCommandWritesTheFrame) {
   EXPECT_EQ(mesh->vertex_count(), direct->mesh.vertex_count());
   // With Draco, vertices of one chunk that quantize alike stay apart (merging them made
   // triangles with a repeated corner).
-  const std::string draco =
-      std::string(ISOSTREAM_CLI_PATH) + " fetch --server " + daemon_->address() +
-      " --volume cayley:40 --iso 0 --eps 0.05 --eye 2.5,1.8,3.1 -o " + out + " 2>/dev/null";
+  const std::string draco = ::isostream::testing::ShellQuote(ISOSTREAM_CLI_PATH) +
+                            " fetch --server " + daemon_->address() +
+                            " --volume cayley:40 --iso 0 --eps 0.05 --eye 2.5,1.8,3.1 -o " + out +
+                            " 2>/dev/null";
   ASSERT_EQ(std::system(draco.c_str()), 0);
   auto drawn = ReadPly(out);
   ASSERT_TRUE(drawn.ok()) << drawn.status();
@@ -263,16 +264,16 @@ TEST_F(Daemon, FetchCommandWritesTheFrame) {
   }
   EXPECT_EQ(repeated, 0u);
 
-  const std::string bad = std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
-                          daemon_->address() + " --volume /etc/passwd --iso 0.1 --eps 0.01 -o " +
-                          out + " 2>/dev/null";
+  const std::string bad = ::isostream::testing::ShellQuote(ISOSTREAM_CLI_PATH) +
+                          " fetch --server " + daemon_->address() +
+                          " --volume /etc/passwd --iso 0.1 --eps 0.01 -o " + out + " 2>/dev/null";
   EXPECT_NE(std::system(bad.c_str()), 0);
 
   // What would surprise is explained, as extract does: an isovalue outside the values, a
   // budget under the coarsest mesh.
   const testing::CommandResult noted = testing::RunCommand(
-      std::string(ISOSTREAM_CLI_PATH) + " fetch --server " + daemon_->address() +
-      " --volume cayley:33 --iso 0,99 --budget 1 -o " + out);
+      ::isostream::testing::ShellQuote(ISOSTREAM_CLI_PATH) + " fetch --server " +
+      daemon_->address() + " --volume cayley:33 --iso 0,99 --budget 1 -o " + out);
   EXPECT_EQ(noted.code, 0) << noted.output;
   EXPECT_NE(noted.output.find("isovalue 99 lies outside cayley:33's values"), std::string::npos)
       << noted.output;

@@ -27,8 +27,9 @@ using ViewRun = testing::CommandResult;
 
 // `whole_command`: args is the command line itself (to wrap the viewer in timeout, say).
 ViewRun View(const std::string& args, bool no_display = false, bool whole_command = false) {
-  return testing::RunCommand(std::string(no_display ? "env -u DISPLAY -u WAYLAND_DISPLAY " : "") +
-                             (whole_command ? "" : std::string(ISOSTREAM_VIEW_PATH) + " ") + args);
+  return testing::RunCommand(
+      std::string(no_display ? "env -u DISPLAY -u WAYLAND_DISPLAY " : "") +
+      (whole_command ? "" : ::isostream::testing::ShellQuote(ISOSTREAM_VIEW_PATH) + " ") + args);
 }
 
 // The viewer draws on the renderer's default background.
@@ -216,7 +217,8 @@ TEST(View, WindowModeShowsTheFrameUnderXvfb) {
   ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
   const std::string png = dir.path() + "/window.png";
   const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24' " +
-                          std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
+                          ::isostream::testing::ShellQuote(ISOSTREAM_VIEW_PATH) + " --server " +
+                          daemon.address() +
                           " --volume buckyball:65 --iso 0.05,0.15,0.25 --eps 0.01 --eye 2.2,1.6,2.8"
                           " --size 240x200 --window --exit-after 1 -o " +
                           png;
@@ -232,12 +234,15 @@ TEST(View, WindowModeShowsTheFrameUnderXvfb) {
 // it starts, xdotool focuses it and does `actions` (it must close itself: --exit-after).
 testing::CommandResult WindowWithInput(const testing::DaemonProcess& daemon,
                                        const std::string& view_args, const std::string& actions) {
-  const std::string view =
-      std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() + " " + view_args;
-  return testing::RunCommand("timeout 60 xvfb-run -a -s '-screen 0 640x480x24' sh -c '" + view +
-                             " & pid=$!; sleep 3; xdotool search --sync --name isostream-view"
-                             " windowfocus --sync " +
-                             actions + "; wait $pid'");
+  // The viewer's path goes in by the environment: quoted inside sh -c '...' it would end the
+  // script's own quotes.
+  const std::string view = "\"$VIEW\" --server " + daemon.address() + " " + view_args;
+  return testing::RunCommand(
+      "timeout 60 env VIEW=" + ::isostream::testing::ShellQuote(ISOSTREAM_VIEW_PATH) +
+      " xvfb-run -a -s '-screen 0 640x480x24' sh -c '" + view +
+      " & pid=$!; sleep 3; xdotool search --sync --name isostream-view"
+      " windowfocus --sync " +
+      actions + "; wait $pid'");
 }
 
 // A frame past the daemon's deadline ends the window with that error: it was taken for the
@@ -250,7 +255,8 @@ TEST(View, WindowReportsAFramePastTheDaemonsDeadline) {
   testing::DaemonProcess daemon;
   ASSERT_TRUE(daemon.Start({"--no-cache", "--deadline-ms", "1"}, dir.path() + "/daemon.log"));
   const std::string cmd = "timeout 30 xvfb-run -a -s '-screen 0 640x480x24' " +
-                          std::string(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
+                          ::isostream::testing::ShellQuote(ISOSTREAM_VIEW_PATH) + " --server " +
+                          daemon.address() +
                           " --volume cayley:129 --iso 0 --eps 0 --size 120x100 --window"
                           " --exit-after 1 -o " +
                           dir.path() + "/never.png";
@@ -292,8 +298,8 @@ TEST(View, WindowOrbitsToItsExitAfterCount) {
   ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
   const std::string png = dir.path() + "/turned.png";
   const testing::CommandResult run = testing::RunCommand(
-      "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' " + std::string(ISOSTREAM_VIEW_PATH) +
-      " --server " + daemon.address() +
+      "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' " +
+      ::isostream::testing::ShellQuote(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
       " --volume buckyball:65 --iso 0.15 --eps 0.01 --size 160x120 --window --orbit 2"
       " --exit-after 3 -o " +
       png);
@@ -426,8 +432,8 @@ TEST(View, MisbehavingServersGiveClearErrors) {
     const ViewRun r = View("--server " + server.address() + common + " --timeout-s 1");
     EXPECT_EQ(r.code, 1);
     EXPECT_NE(r.output.find("did not complete within 1 s"), std::string::npos) << r.output;
-    const ViewRun f = testing::RunCommand(std::string(ISOSTREAM_CLI_PATH) + " fetch --server " +
-                                          server.address() +
+    const ViewRun f = testing::RunCommand(::isostream::testing::ShellQuote(ISOSTREAM_CLI_PATH) +
+                                          " fetch --server " + server.address() +
                                           " --volume sphere:33 --iso 0.5 --eps 0.01 "
                                           "--timeout-s 1 -o " +
                                           dir.path() + "/never.ply");
@@ -504,7 +510,7 @@ TEST(View, AServerThatNeverEndsTheCallAfterTheFrameHoldsNoClient) {
   EXPECT_TRUE(std::filesystem::exists(dir.path() + "/frame.png"));
   EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(20));
   const testing::CommandResult fetched = testing::RunCommand(
-      std::string(ISOSTREAM_CLI_PATH) + " fetch --server " + server.address() +
+      ::isostream::testing::ShellQuote(ISOSTREAM_CLI_PATH) + " fetch --server " + server.address() +
       " --volume sphere:33 --iso 0.5 --eps 0.01 --eye 2,2,2 --codec raw --timeout-s 2 -o " +
       dir.path() + "/frame.ply");
   EXPECT_EQ(fetched.code, 0) << fetched.output;
@@ -518,12 +524,12 @@ TEST(View, OtherFramesChunksDoNotKeepTheTimeoutQuiet) {
   testing::MisbehavingServer server(testing::Misbehaviour::kOtherFrames);
   ASSERT_TRUE(server.ok());
   const auto t0 = std::chrono::steady_clock::now();
-  const ViewRun r =
-      View("timeout 60 " + std::string(ISOSTREAM_VIEW_PATH) + " --server " + server.address() +
-               " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 --timeout-s 2"
-               " -o " +
-               dir.path() + "/never.png",
-           false, true);
+  const ViewRun r = View("timeout 60 " + ::isostream::testing::ShellQuote(ISOSTREAM_VIEW_PATH) +
+                             " --server " + server.address() +
+                             " --volume sphere:33 --iso 0.5 --eps 0.01 --size 64x64 --timeout-s 2"
+                             " -o " +
+                             dir.path() + "/never.png",
+                         false, true);
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("no data from the server for 2 s"), std::string::npos) << r.output;
   EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(20));

@@ -19,7 +19,8 @@ namespace isostream::render {
 namespace {
 
 ::isostream::testing::CommandResult RenderMesh(const std::string& args) {
-  return ::isostream::testing::RunCommand(std::string(ISOSTREAM_RENDER_MESH_PATH) + " " + args);
+  return ::isostream::testing::RunCommand(
+      ::isostream::testing::ShellQuote(ISOSTREAM_RENDER_MESH_PATH) + " " + args);
 }
 
 // Per test: ctest runs the tests of this file in parallel processes.

@@ -23,7 +23,7 @@ namespace {
 using CliRun = testing::CommandResult;
 
 CliRun Cli(const std::string& args) {
-  return testing::RunCommand(std::string(ISOSTREAM_CLI) + " " + args);
+  return testing::RunCommand(::isostream::testing::ShellQuote(ISOSTREAM_CLI) + " " + args);
 }
 
 std::string TempPath(const std::string& name) {
