@@ -13,6 +13,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <new>
@@ -47,6 +49,33 @@ class TemporariesInProgress {
  private:
   mutable std::mutex mu_;
   std::set<std::string> names_;
+};
+
+// The entries whose hierarchies this process still holds, by file name: a daemon serving a
+// volume from memory reads its entry once, at start, so its time said "least recently used"
+// while it was the most used, and other volumes' stores evicted it (a rebuild at the next
+// start). They go last.
+class HeldEntries {
+ public:
+  static HeldEntries& Get() {
+    static HeldEntries instance;
+    return instance;
+  }
+  void Add(const std::string& name, const HierarchyPtr& hierarchy) {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (auto it = held_.begin(); it != held_.end();)  // those released meanwhile
+      it = it->second.expired() ? held_.erase(it) : std::next(it);
+    held_[name] = hierarchy;
+  }
+  bool Contains(const std::string& name) const {
+    std::lock_guard<std::mutex> lock(mu_);
+    const auto it = held_.find(name);
+    return it != held_.end() && !it->second.expired();
+  }
+
+ private:
+  mutable std::mutex mu_;
+  std::map<std::string, std::weak_ptr<const Hierarchy>> held_;
 };
 
 constexpr char kMagic[8] = {'I', 'S', 'O', 'H', 'I', 'E', 'R', '\0'};
@@ -201,6 +230,7 @@ bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples
 // alone. Failures (a file removed meanwhile by another process) are skipped.
 void EvictBeyond(const std::string& dir, uint64_t max_bytes, const std::string& keep) {
   struct Entry {
+    bool held;  // by this process (HeldEntries): after every other
     std::filesystem::file_time_type used;
     uint64_t bytes;
     std::filesystem::path path;
@@ -217,7 +247,8 @@ void EvictBeyond(const std::string& dir, uint64_t max_bytes, const std::string& 
     if (e1 || e2) continue;
     if (f.path().extension() == ".eta") {
       total += bytes;
-      if (f.path() != std::filesystem::path(keep)) entries.push_back({used, bytes, f.path()});
+      if (f.path() != std::filesystem::path(keep))
+        entries.push_back({HeldEntries::Get().Contains(name), used, bytes, f.path()});
       continue;
     }
     // "NAME.eta.tmp.PID.SERIAL": a write in progress counts; one whose writer is gone (killed
@@ -234,8 +265,9 @@ void EvictBeyond(const std::string& dir, uint64_t max_bytes, const std::string& 
       total += bytes;
     }
   }
-  std::sort(entries.begin(), entries.end(),
-            [](const Entry& a, const Entry& b) { return a.used < b.used; });
+  std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+    return a.held != b.held ? b.held : a.used < b.used;
+  });
   for (const Entry& e : entries) {
     if (total <= max_bytes) break;
     std::error_code e1;
@@ -306,6 +338,7 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
     if (read) {
       std::error_code ec;  // a hit is a use: the eviction order is by this time
       std::filesystem::last_write_time(path, std::filesystem::file_time_type::clock::now(), ec);
+      HeldEntries::Get().Add(std::filesystem::path(path).filename().string(), read);
       if (outcome) *outcome = CacheOutcome::kHit;
       if (why) *why = "loaded " + path;
       return read;
@@ -324,6 +357,7 @@ absl::StatusOr<HierarchyPtr> LoadOrBuildHierarchy(PaddedSamples samples,
     reason += "; not stored: " + write_why;
   } else {
     reason += "; stored " + path;
+    HeldEntries::Get().Add(std::filesystem::path(path).filename().string(), built);
     if (cache.max_bytes > 0) EvictBeyond(cache.dir, cache.max_bytes, path);
   }
   if (outcome) *outcome = result;

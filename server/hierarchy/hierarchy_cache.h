@@ -22,7 +22,8 @@ struct HierarchyCacheOptions {
   std::string dir;  // empty: no cache
   // After a store, the least recently used entries (by modification time, which a hit
   // refreshes) are removed until the cache's entries total at most this many bytes; the one
-  // just stored stays. 0: no cap. The daemon sets one: its clients name the volumes.
+  // just stored stays, and entries whose hierarchies this process still holds go last. 0: no
+  // cap. The daemon sets one: its clients name the volumes.
   uint64_t max_bytes = 0;
 };
 

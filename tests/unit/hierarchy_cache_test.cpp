@@ -4,8 +4,8 @@
 
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -117,6 +117,29 @@ TEST_F(HierarchyCacheTest, CapEvictsTheLeastRecentlyUsed) {
   EXPECT_FALSE(fs::exists(dead));
   EXPECT_TRUE(fs::exists(live));
   EXPECT_FALSE(fs::exists(earlier_self));
+}
+
+// Entries whose hierarchies this process still holds (a daemon serving them from memory) go
+// after every other, however old their time: read once at start, a served volume's entry
+// looked least recently used and other stores evicted it.
+TEST_F(HierarchyCacheTest, EntriesStillHeldAreEvictedLast) {
+  CacheOutcome outcome;
+  HierarchyPtr held = Get(Samples(4, 0), &outcome);
+  Get(Samples(4, 1), &outcome);  // released at once
+  const std::string a = HierarchyCachePath(cache_.dir, Samples(4, 0));
+  const std::string b = HierarchyCachePath(cache_.dir, Samples(4, 1));
+  const auto now = fs::file_time_type::clock::now();
+  fs::last_write_time(a, now - std::chrono::seconds(20));  // the oldest, but held
+  fs::last_write_time(b, now - std::chrono::seconds(10));
+  cache_.max_bytes = 2 * fs::file_size(a) + fs::file_size(a) / 2;  // room for two entries
+  Get(Samples(4, 2), &outcome);
+  EXPECT_TRUE(fs::exists(a));
+  EXPECT_FALSE(fs::exists(b));
+  held.reset();  // released: the oldest goes first again
+  fs::last_write_time(a, now - std::chrono::seconds(20));
+  Get(Samples(4, 3), &outcome);
+  EXPECT_FALSE(fs::exists(a));
+  EXPECT_TRUE(fs::exists(HierarchyCachePath(cache_.dir, Samples(4, 2))));
 }
 
 TEST_F(HierarchyCacheTest, ChangedSamplesAreNotServedFromCache) {
