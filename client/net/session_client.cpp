@@ -1,5 +1,9 @@
 #include "client/net/session_client.h"
 
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
 #include "proto/health.grpc.pb.h"
 #include "shared/file_io.h"
 #include "shared/frame_codec.h"
@@ -312,12 +316,26 @@ absl::StatusOr<Frame> Client::Fetch(const pb::ViewRequest& view,
     }
   }
   if (have) {
-    // The frame is whole and checked: a server that does not end the call after it must not
-    // turn it into a timeout (it did, after the frame had arrived).
-    context.TryCancel();
+    // The frame is whole and checked. The server ends the call right after it, and waiting for
+    // that lets it free the call's session slot before this returns (cancelling at once, a
+    // caller's next call could find its own last one still holding the slot); a server that
+    // does not end it within a grace must not turn the frame into a timeout (it did).
+    std::mutex mu;
+    std::condition_variable cv;
+    bool ended_call = false;
+    std::thread grace([&] {
+      std::unique_lock<std::mutex> lock(mu);
+      if (!cv.wait_for(lock, kEndOfCallGrace, [&] { return ended_call; })) context.TryCancel();
+    });
     while (reader->Read(&chunk)) {
     }
     const absl::Status ended = FromGrpc(reader->Finish());
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      ended_call = true;
+    }
+    cv.notify_all();
+    grace.join();
     if (!ended.ok() && ended.code() != absl::StatusCode::kCancelled) return ended;
   } else {
     ISOSTREAM_RETURN_IF_ERROR(FromGrpc(reader->Finish()));
