@@ -1,0 +1,306 @@
+// The frame producer without a process, against sinks that drain as a client would (never,
+// slowly, at once): bounded memory, the deadline and what it bounds, chunk order, and the
+// client's frame assembly of what it cuts.
+#include "server/service/frame_producer.h"
+
+#include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
+
+#include <chrono>
+#include <mutex>
+#include <set>
+#include <thread>
+
+#include "client/net/session_client.h"
+#include "server/extract/extractor.h"
+#include "server/service/catalogue.h"
+#include "shared/frame_codec.h"
+
+namespace isostream::service {
+namespace {
+// Never writes anything: Queued() is everything ever pushed.
+class StuckSink : public ChunkSink {
+ public:
+  bool Push(uint64_t, ::isostream::v1::FrameChunk&& chunk) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    chunks_.push_back(std::move(chunk));
+    return true;
+  }
+  size_t Queued() const override {
+    std::lock_guard<std::mutex> lock(mu_);
+    return chunks_.size();
+  }
+  std::vector<::isostream::v1::FrameChunk> chunks_;
+  mutable std::mutex mu_;
+};
+
+// A frame producer with `settings` and `encoders` encoding threads, and buckyball:65 from a
+// catalogue of its own to produce frames of.
+struct ProducerRig {
+  ProducerRig(const FrameSettings& settings, int encoders)
+      : catalogue(CatalogueOptions{}), pool(encoders), producer(settings, &pool, &counters) {
+    auto got = catalogue.Get("buckyball:65");
+    EXPECT_TRUE(got.ok()) << got.status();
+    if (got.ok()) volume = *got;
+  }
+  VolumeCatalogue catalogue;
+  WorkerPool pool;
+  ServerCounters counters;
+  FrameProducer producer;
+  ServedVolumePtr volume;  // null if it could not be prepared
+};
+
+// Produces one frame of buckyball:65 (isovalues `isos`, `eps`, the eye at x = 3) in chunks of
+// `chunk` triangles, at most `queued` held, with a deadline of `deadline_ms` and `encoders`
+// encoding threads, into `sink`, which never drains.
+absl::Status ProduceIntoStuckSink(int chunk, int queued, int deadline_ms,
+                                  const std::vector<float>& isos, double eps, int encoders,
+                                  StuckSink* sink) {
+  FrameSettings settings;
+  settings.chunk_triangles = chunk;
+  settings.first_chunk_triangles = chunk;
+  settings.max_queued_chunks = queued;
+  settings.deadline_ms = deadline_ms;
+  ProducerRig rig(settings, encoders);
+  if (!rig.volume) return absl::InternalError("buckyball:65 could not be prepared");
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  for (float iso : isos) view.add_surfaces()->set_isovalue(iso);
+  view.set_eps(eps);
+  view.mutable_camera()->mutable_eye()->set_x(3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  if (!request.ok()) return request.status();
+  std::atomic<bool> cancel{false};
+  const auto now = std::chrono::steady_clock::now();
+  return rig.producer.Run(*rig.volume, view, *request, 1, &cancel, sink, now, now);
+}
+
+// Takes its first `slow` chunks one per 100 ms from the first push, the rest at once: a client
+// slow but steady through a progressive view's coarse frame.
+class SlowStartSink : public ChunkSink {
+ public:
+  explicit SlowStartSink(size_t slow) : slow_(slow) {}
+  bool Push(uint64_t, ::isostream::v1::FrameChunk&& chunk) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (chunks_.empty()) first_ = std::chrono::steady_clock::now();
+    chunks_.push_back(std::move(chunk));
+    return true;
+  }
+  size_t Queued() const override {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (chunks_.empty()) return 0;
+    const auto taken =
+        size_t((std::chrono::steady_clock::now() - first_) / std::chrono::milliseconds(100));
+    const size_t held = std::min(chunks_.size(), slow_);
+    return held > taken ? held - taken : 0;
+  }
+  std::vector<::isostream::v1::FrameChunk> chunks_;
+
+ private:
+  const size_t slow_;
+  mutable std::mutex mu_;
+  std::chrono::steady_clock::time_point first_;
+};
+
+// A progressive view's refined frame has its own deadline, from when the coarse frame has gone
+// out: a client taking the coarse frame's chunks slowly (~2 s here, past the 500 ms deadline,
+// but never silent for one) had the refined frame fail at once.
+TEST(FrameProducer, TheRefinedFrameIsNotChargedForTheCoarseFramesDelivery) {
+  FrameSettings settings;
+  settings.chunk_triangles = settings.first_chunk_triangles = 256;
+  settings.max_queued_chunks = 2;
+  settings.coarse_triangles = 5000;
+  settings.deadline_ms = 500;
+  ProducerRig rig(settings, 2);
+  ASSERT_TRUE(rig.volume);
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  for (float iso : {0.05f, 0.15f, 0.25f}) view.add_surfaces()->set_isovalue(iso);
+  view.set_eps(0.002);
+  view.set_progressive(true);
+  view.set_codec(::isostream::v1::RAW);
+  view.mutable_camera()->mutable_eye()->set_x(3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok());
+  SlowStartSink sink(20);
+  std::atomic<bool> cancel{false};
+  const auto now = std::chrono::steady_clock::now();
+  const absl::Status s = rig.producer.Run(*rig.volume, view, *request, 1, &cancel, &sink, now, now);
+  EXPECT_TRUE(s.ok()) << s;
+  ASSERT_FALSE(sink.chunks_.empty());
+  EXPECT_TRUE(sink.chunks_.front().coarse());
+  EXPECT_GT(std::chrono::steady_clock::now() - now, std::chrono::milliseconds(1000))
+      << "the coarse frame went out quickly: nothing tested";
+  EXPECT_FALSE(sink.chunks_.back().coarse());
+  EXPECT_TRUE(sink.chunks_.back().last());
+}
+
+TEST(FrameProducer, StopsAtTheQueueBoundAndHitsTheDeadline) {
+  StuckSink sink;
+  const absl::Status s = ProduceIntoStuckSink(2048, 4, 300, {0.05f, 0.15f}, 0.002, 2, &sink);
+  EXPECT_EQ(s.code(), absl::StatusCode::kDeadlineExceeded) << s;
+  EXPECT_LE(sink.chunks_.size(), 4u);  // never more than max_queued_chunks held
+  for (size_t i = 0; i < sink.chunks_.size(); ++i) EXPECT_EQ(sink.chunks_[i].chunk_index(), i);
+}
+
+// A client that stops reading holds only its own frame's thread, not the extraction's TBB
+// workers, which every extraction in the daemon shares: its chunks wait for room after the
+// extraction has returned. They used to wait inside the extractor's on_ready, under the lock
+// every worker of that extraction takes after each subtree, so the workers stayed there until
+// the deadline and other frames ran on their own threads alone.
+TEST(FrameProducer, AStuckClientLeavesTheSharedWorkersFree) {
+  if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "TBB has no worker thread";
+  StuckSink sink;
+  absl::Status stuck;
+  std::thread frame([&] {
+    stuck = ProduceIntoStuckSink(1024, 2, 2500, {0.05f, 0.15f, 0.25f}, 0.0, 1, &sink);
+  });
+  // The volume prepared and the frame's queue full by now.
+  std::this_thread::sleep_for(std::chrono::milliseconds(800));
+  // Work another frame would give the workers: slow items, so that a free worker joins.
+  std::mutex mu;
+  std::set<std::thread::id> threads;
+  tbb::parallel_for(0, 64, [&](int) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    std::lock_guard<std::mutex> lock(mu);
+    threads.insert(std::this_thread::get_id());
+  });
+  frame.join();
+  EXPECT_EQ(stuck.code(), absl::StatusCode::kDeadlineExceeded) << stuck;
+  EXPECT_LE(sink.chunks_.size(), 2u);
+  EXPECT_GE(threads.size(), 2u) << "the other work ran on its own thread only";
+}
+
+TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
+  FrameSettings settings;
+  settings.first_chunk_triangles = 1000;
+  settings.chunk_triangles = 7000;
+  settings.max_queued_chunks = 1000;
+  ProducerRig rig(settings, 2);
+  ASSERT_TRUE(rig.volume);
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  view.add_surfaces()->set_isovalue(0.1f);
+  view.set_eps(0.002);
+  view.mutable_camera()->mutable_eye()->set_y(-3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok());
+  std::atomic<bool> cancel{false};
+  StuckSink sink;
+  const auto now = std::chrono::steady_clock::now();
+  ASSERT_TRUE(rig.producer.Run(*rig.volume, view, *request, 1, &cancel, &sink, now, now).ok());
+  auto direct =
+      Extract(*rig.volume->prepared.hierarchy, rig.volume->prepared.grid_to_world, *request);
+  ASSERT_TRUE(direct.ok());
+  ASSERT_GT(sink.chunks_.size(), 4u);
+  uint64_t next = 0;
+  for (size_t i = 0; i < sink.chunks_.size(); ++i) {
+    const auto& c = sink.chunks_[i];
+    EXPECT_EQ(c.chunk_index(), i);
+    EXPECT_EQ(c.first_triangle(), next);
+    if (i < 3) {
+      EXPECT_EQ(c.triangle_count(), std::min<uint32_t>(7000, 1000u << i));
+    }
+    EXPECT_EQ(c.last(), i + 1 == sink.chunks_.size());
+    next += c.triangle_count();
+  }
+  EXPECT_EQ(next, direct->mesh.triangle_count());
+  EXPECT_EQ(sink.chunks_.back().stats().triangles(), int64_t(next));
+  EXPECT_EQ(rig.counters.frames_started.load(), 1);
+
+  // The client puts them back together; a frame whose last chunk comes early, or whose last
+  // chunk's counts disagree with what arrived, is DATA_LOSS, not a smaller frame.
+  auto assemble = [](const std::vector<::isostream::v1::FrameChunk>& chunks,
+                     int64_t max_triangles = net::kDefaultMaxFrameTriangles) {
+    net::FrameAssembler a(max_triangles);
+    for (const auto& c : chunks) {
+      const absl::Status s = a.Add(c);
+      if (!s.ok()) return s;
+    }
+    return a.complete() ? absl::OkStatus() : absl::UnavailableError("incomplete");
+  };
+  ASSERT_TRUE(assemble(sink.chunks_).ok());
+  std::vector<::isostream::v1::FrameChunk> early = {sink.chunks_[0]};
+  early[0].set_last(true);
+  early[0].set_chunk_count(uint32_t(sink.chunks_.size()));
+  *early[0].mutable_stats() = sink.chunks_.back().stats();
+  EXPECT_EQ(assemble(early).code(), absl::StatusCode::kDataLoss);
+  early[0].set_chunk_count(1);  // consistent count, but the stats count the whole frame
+  EXPECT_EQ(assemble(early).code(), absl::StatusCode::kDataLoss);
+  auto miscounted = sink.chunks_;
+  miscounted.back().set_chunk_count(miscounted.back().chunk_count() + 1);
+  EXPECT_EQ(assemble(miscounted).code(), absl::StatusCode::kDataLoss);
+  // A frame past the client's limit is refused at the chunk that would pass it (a server
+  // streaming one frame without end cannot fill the client's memory); exactly at it, it fits.
+  EXPECT_TRUE(assemble(sink.chunks_, int64_t(next)).ok());
+  net::FrameAssembler limited(int64_t(next) - 1);
+  absl::Status refused;
+  size_t refused_at = 0;
+  for (; refused_at < sink.chunks_.size() && refused.ok(); ++refused_at)
+    refused = limited.Add(sink.chunks_[refused_at]);
+  EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted) << refused;
+  EXPECT_EQ(refused_at, sink.chunks_.size());  // the last chunk, before decoding it
+  EXPECT_EQ(limited.frame().mesh.triangle_count(), next - sink.chunks_.back().triangle_count());
+
+  // Only the last chunk may be empty: empty chunks without end are a frame that never completes
+  // nor grows (the viewer waited on them for ever).
+  {
+    ::isostream::v1::FrameChunk empty;
+    ASSERT_TRUE(EncodeChunkRaw(OrderedMesh{}, 0, 0, empty.mutable_data()).ok());
+    empty.set_frame_id(sink.chunks_[0].frame_id());
+    net::FrameAssembler endless;
+    EXPECT_EQ(endless.Add(empty).code(), absl::StatusCode::kDataLoss);
+    empty.set_last(true);
+    empty.set_chunk_count(1);
+    net::FrameAssembler empty_frame;
+    EXPECT_TRUE(empty_frame.Add(empty).ok());
+    EXPECT_TRUE(empty_frame.complete());
+  }
+
+  // A refused chunk leaves the frame as it was: a chunk whose field miscounts its data, then the
+  // right one, give the frame once (the first had been decoded into it before the check).
+  net::FrameAssembler careful;
+  auto wrong = sink.chunks_[0];
+  wrong.set_triangle_count(wrong.triangle_count() + 1);
+  EXPECT_EQ(careful.Add(wrong).code(), absl::StatusCode::kDataLoss);
+  EXPECT_EQ(careful.frame().mesh.triangle_count(), 0u);
+  for (const auto& c : sink.chunks_) ASSERT_TRUE(careful.Add(c).ok());
+  ASSERT_TRUE(careful.complete());
+  EXPECT_EQ(careful.frame().mesh.triangle_count(), next);
+  EXPECT_EQ(careful.frame().mesh.vertex_count(), [&] {
+    net::FrameAssembler plain;
+    for (const auto& c : sink.chunks_) EXPECT_TRUE(plain.Add(c).ok());
+    return plain.frame().mesh.vertex_count();
+  }());
+  // The first chunk of a new frame too: refused, it leaves the complete frame before it (it
+  // used to replace it by an empty frame in progress).
+  auto next_frame = sink.chunks_[0];
+  next_frame.set_frame_id(next_frame.frame_id() + 1);
+  next_frame.set_first_triangle(5);
+  EXPECT_EQ(careful.Add(next_frame).code(), absl::StatusCode::kDataLoss);
+  EXPECT_TRUE(careful.complete());
+  EXPECT_EQ(careful.frame().mesh.triangle_count(), next);
+  EXPECT_EQ(careful.frame().id, sink.chunks_[0].frame_id());
+
+  // A chunk declaring more triangles than a stream's chunks hold is refused before decoding
+  // (a 64 KB chunk could expand to a million triangles).
+  OrderedMesh many;
+  for (uint32_t t = 0; t <= kMaxStreamChunkTriangles; ++t) {
+    for (int i = 0; i < 3; ++i) {
+      many.positions.insert(many.positions.end(), {float(t), float(i), 0.0f});
+      many.normals.insert(many.normals.end(), {0.0f, 0.0f, 1.0f});
+      many.triangles.push_back(3 * t + uint32_t(i));
+    }
+    many.surface.push_back(0);
+  }
+  ::isostream::v1::FrameChunk big;
+  ASSERT_TRUE(EncodeChunk(many, 0, many.triangle_count(), CodecOptions{}, big.mutable_data()).ok());
+  big.set_triangle_count(uint32_t(many.triangle_count()));
+  net::FrameAssembler bounded;
+  const absl::Status too_big = bounded.Add(big);
+  EXPECT_EQ(too_big.code(), absl::StatusCode::kDataLoss) << too_big;
+  EXPECT_NE(too_big.message().find("at most 65536"), std::string::npos) << too_big;
+}
+
+}  // namespace
+}  // namespace isostream::service
