@@ -11,13 +11,19 @@ std::string IsovalueOutsideNote(float iso, float min_value, float max_value,
          ShortestText(min_value) + ", " + ShortestText(max_value) + "]: no surface for it";
 }
 
-std::string FrameNote(int64_t triangles, int64_t budget, double eps_used,
+std::string FrameNote(int64_t triangles, int64_t budget, int64_t fitted, double eps_used,
                       bool some_isovalue_inside) {
   // The budget search answers with the coarsest mesh when even that is over the budget.
   if (budget > 0 && triangles > budget)
     return "the coarsest mesh (eps " + ShortestText(eps_used) + ") has " +
            std::to_string(triangles) + " triangles, over the budget of " + std::to_string(budget) +
            ": no coarser mesh exists";
+  // The daemon's frame limit lowered the budget, and that made the mesh coarser: the user's
+  // budget alone would not explain the eps.
+  if (budget > 0 && fitted > 0 && fitted < budget && eps_used > 0)
+    return "the budget of " + std::to_string(budget) +
+           " triangles is over the daemon's frame limit: the frame was fitted to its limit of " +
+           std::to_string(fitted) + " (isostreamd --max-triangles)";
   // Only an eps above 0 can be lowered. A budget's search stops at an empty mesh above 0 when
   // the next finer mesh is over the budget (a budget of 1, say): the budget is what to change.
   if (triangles == 0 && eps_used > 0 && some_isovalue_inside && budget > 0)
@@ -28,13 +34,6 @@ std::string FrameNote(int64_t triangles, int64_t budget, double eps_used,
     return "the mesh is empty at eps " + ShortestText(eps_used) +
            ": a smaller eps (data units) refines the coarse tetrahedra that miss the surfaces";
   return "";
-}
-
-std::string BudgetLimitNote(int64_t budget, int64_t fitted, double eps_used) {
-  if (fitted <= 0 || fitted >= budget || eps_used <= 0) return "";
-  return "the budget of " + std::to_string(budget) +
-         " triangles is over the daemon's frame limit: the frame was fitted to its limit of " +
-         std::to_string(fitted) + " (isostreamd --max-triangles)";
 }
 
 }  // namespace isostream

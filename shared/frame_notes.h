@@ -29,15 +29,11 @@ bool NoteIsovaluesOutside(const char* tool, const Isovalues& isovalues, float mi
   return some_inside;
 }
 
-// For a frame of `triangles` at `eps_used`, asked for with `budget` (0: none), where
-// `some_isovalue_inside`: some isovalue lies within the volume's values (else the notes of
-// IsovalueOutsideNote have said why the mesh is empty).
-std::string FrameNote(int64_t triangles, int64_t budget, double eps_used,
+// For a frame of `triangles` at `eps_used`, asked for with `budget` (0: none) and fitted to
+// `fitted` (a daemon's FrameStats::triangle_budget, lower where its frame limit lowered the
+// budget; `budget` otherwise), where `some_isovalue_inside`: some isovalue lies within the
+// volume's values (else the notes of IsovalueOutsideNote have said why the mesh is empty).
+std::string FrameNote(int64_t triangles, int64_t budget, int64_t fitted, double eps_used,
                       bool some_isovalue_inside);
-
-// For a daemon's frame asked for with `budget` and fitted to `fitted` (FrameStats::
-// triangle_budget): when the daemon's frame limit lowered the budget and that made the mesh
-// coarser (eps_used > 0), says so; the user's budget alone would not explain the eps.
-std::string BudgetLimitNote(int64_t budget, int64_t fitted, double eps_used);
 
 }  // namespace isostream

@@ -362,13 +362,10 @@ int Run(const Args& args) {
         "%s: %lld triangles in %d chunks (%.1f KiB), eps %s, %d coarse frame(s) first, %.0f ms\n",
         path.c_str(), (long long)frame->mesh.triangle_count(), frame->chunks, frame->bytes / 1024.0,
         ShortestText(frame->stats.eps_used()).c_str(), coarse, ms);
-    const std::string note = FrameNote(int64_t(frame->mesh.triangle_count()), state.budget,
-                                       frame->stats.eps_used(), some_inside);
+    const std::string note =
+        FrameNote(int64_t(frame->mesh.triangle_count()), state.budget,
+                  frame->stats.triangle_budget(), frame->stats.eps_used(), some_inside);
     if (!note.empty() && i == 0) std::fprintf(stderr, "isostream-view: note: %s\n", note.c_str());
-    const std::string limit_note =
-        BudgetLimitNote(state.budget, frame->stats.triangle_budget(), frame->stats.eps_used());
-    if (!limit_note.empty() && i == 0)
-      std::fprintf(stderr, "isostream-view: note: %s\n", limit_note.c_str());
   }
   // Every frame asked for is written: how the stream ends now (a daemon stopping, say) changes
   // nothing the user asked for.

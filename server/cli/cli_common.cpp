@@ -104,6 +104,11 @@ absl::StatusOr<std::vector<float>> ParseIsovalues(const std::string& text) {
   return out;
 }
 
+absl::Status CheckViewArgs(const ViewArgs& args) {
+  const auto early = MakeRequest(args, Volume{});
+  return early.ok() ? ValidateRequest(*early) : early.status();
+}
+
 absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& volume) {
   ExtractRequest r;
   ISOSTREAM_ASSIGN_OR_RETURN(r.isovalues, ParseIsovalues(args.iso));

@@ -49,6 +49,10 @@ void AddViewOptions(CLI::App* cmd, ViewArgs* args);
 // along an oblique diagonal, when neither --eye nor --view-dir is given.
 absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& volume);
 
+// The view's flags checked without the volume (only the default eye needs it), before work
+// that may take minutes (preparing a large volume, a call to a daemon).
+absl::Status CheckViewArgs(const ViewArgs& args);
+
 absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& text, const char* what);
 
 // --iso's list as the samples' single precision: a value past the float range is refused

@@ -31,9 +31,9 @@ void PrintStats(const ExtractRequest& r, const ExtractStats& s, const PreparedVo
     std::printf("  surface %zu   iso %-10g %lld triangles\n", i, r.isovalues[i],
                 (long long)s.triangles_per_surface[i]);
   std::printf("eps used      %s%s\n", ShortestText(s.eps_used).c_str(),
-              r.budget == 0                ? ""
+              r.budget == 0             ? ""
               : s.triangles <= r.budget ? "  (found for the budget)"
-                                          : "  (the coarsest mesh, over the budget)");
+                                        : "  (the coarsest mesh, over the budget)");
   std::printf("tets visited  %lld  (leaves with triangles %lld, subtrees %d)\n",
               (long long)s.tets_visited, (long long)s.leaves, s.subtrees);
   std::printf("ms            load %.1f  pad %.1f  hierarchy %.1f (cache %s)\n", p.load_s * 1e3,
@@ -54,15 +54,11 @@ int RunExtract(const ExtractArgs& args) {
     std::cerr << "isostream extract: " << out.message() << "\n";
     return 2;
   }
-  // The view's flags too (only the default eye needs the volume): a typo in --iso was reported
-  // after minutes of preparing a large volume.
-  {
-    const auto early = MakeRequest(args.view, Volume{});
-    const absl::Status valid = early.ok() ? ValidateRequest(*early) : early.status();
-    if (!valid.ok()) {
-      std::cerr << "isostream extract: " << valid.message() << "\n";
-      return 2;
-    }
+  // The view's flags too: a typo in --iso was reported after minutes of preparing a large
+  // volume.
+  if (const absl::Status valid = CheckViewArgs(args.view); !valid.ok()) {
+    std::cerr << "isostream extract: " << valid.message() << "\n";
+    return 2;
   }
   if (const absl::Status spec = CheckVolumeSpec(args.volume); !spec.ok()) {
     std::cerr << "isostream extract: " << spec.message() << "\n";
@@ -105,7 +101,8 @@ int RunExtract(const ExtractArgs& args) {
   }
   if (args.stats) PrintStats(*request, result->stats, *prepared);
   const std::string note =
-      FrameNote(result->stats.triangles, request->budget, result->stats.eps_used, some_inside);
+      FrameNote(result->stats.triangles, request->budget, request->budget, result->stats.eps_used,
+                some_inside);  // no daemon: fitted to the budget
   if (!note.empty()) std::cerr << "isostream extract: note: " << note << "\n";
   std::fprintf(stderr, "wrote %s: %lld triangles %s (eps %s)\n", args.output.c_str(),
                (long long)result->stats.triangles,

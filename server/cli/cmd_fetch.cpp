@@ -78,11 +78,8 @@ int RunFetch(const FetchArgs& args) {
     return fail(std::string(writable.message()), 2);
   // The view's flags, as extract checks them, before any call (a zero --view-dir came back as
   // the server's refusal, exit 1, where extract exits 2 for it).
-  {
-    const auto early = MakeRequest(args.view, Volume{});
-    const absl::Status valid = early.ok() ? ValidateRequest(*early) : early.status();
-    if (!valid.ok()) return fail(std::string(valid.message()), 2);
-  }
+  if (const absl::Status valid = CheckViewArgs(args.view); !valid.ok())
+    return fail(std::string(valid.message()), 2);
   net::ClientOptions options;
   options.address = args.server;
   options.token = args.token;
@@ -135,12 +132,10 @@ int RunFetch(const FetchArgs& args) {
     std::printf("ms            extract %.1f  encode %.1f (summed over chunks)  frame %.1f\n",
                 s.extract_ms(), s.encode_ms(), s.frame_ms());
   }
-  const std::string note = FrameNote(int64_t(frame->mesh.triangle_count()), request->budget,
-                                     frame->stats.eps_used(), some_inside);
+  const std::string note =
+      FrameNote(int64_t(frame->mesh.triangle_count()), request->budget,
+                frame->stats.triangle_budget(), frame->stats.eps_used(), some_inside);
   if (!note.empty()) std::cerr << "isostream fetch: note: " << note << "\n";
-  const std::string limit_note =
-      BudgetLimitNote(request->budget, frame->stats.triangle_budget(), frame->stats.eps_used());
-  if (!limit_note.empty()) std::cerr << "isostream fetch: note: " << limit_note << "\n";
   std::fprintf(stderr, "wrote %s: %zu triangles %s (eps %s)\n", args.output.c_str(),
                frame->mesh.triangle_count(),
                args.view.order == "none" ? "unordered" : "in back-to-front order",
