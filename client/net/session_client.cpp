@@ -336,7 +336,11 @@ absl::StatusOr<Frame> Client::Fetch(const pb::ViewRequest& view,
     }
     cv.notify_all();
     grace.join();
-    if (!ended.ok() && ended.code() != absl::StatusCode::kCancelled) return ended;
+    // Ended by this side (the grace, or the call's own deadline running out during it): the
+    // frame stands.
+    if (!ended.ok() && ended.code() != absl::StatusCode::kCancelled &&
+        ended.code() != absl::StatusCode::kDeadlineExceeded)
+      return ended;
   } else {
     ISOSTREAM_RETURN_IF_ERROR(FromGrpc(reader->Finish()));
   }

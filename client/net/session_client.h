@@ -25,7 +25,7 @@ namespace pb = ::isostream::v1;
 // that streams a frame past it is refused with RESOURCE_EXHAUSTED instead of filling memory.
 inline constexpr int64_t kDefaultMaxFrameTriangles = int64_t{1} << 26;
 // How long Fetch waits, once its frame is whole, for the server to end the call.
-inline constexpr std::chrono::milliseconds kEndOfCallGrace{2000};
+inline constexpr std::chrono::milliseconds kEndOfCallGrace{1000};
 
 struct ClientOptions {
   std::string address = "127.0.0.1:7878";
