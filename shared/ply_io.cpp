@@ -23,11 +23,9 @@ namespace {
 // ---------------------------------------------------------------------------------------------
 // Writing
 
-template <typename T>
-void AppendRaw(std::string* out, T value) {
-  char bytes[sizeof(T)];
-  std::memcpy(bytes, &value, sizeof(T));
-  out->append(bytes, sizeof(T));
+char* PutRaw(char* at, const void* from, size_t size) {
+  std::memcpy(at, from, size);
+  return at + size;
 }
 
 void AppendText(std::string* out, float value) {
@@ -462,15 +460,20 @@ absl::Status SerializePly(const OrderedMesh& mesh, bool binary, std::string* out
   const size_t triangle_count = mesh.triangle_count();
   *out = PlyHeader(mesh, binary);
   if (binary) {
-    out->reserve(out->size() + 24 * vertex_count + 14 * triangle_count);
+    // Sized once and filled through a cursor: appending value by value cost ~400 instructions
+    // a triangle, more than extracting it.
+    const size_t header_size = out->size();
+    out->resize(header_size + 24 * vertex_count + 14 * triangle_count);
+    char* at = out->data() + header_size;
+    const float zeros[3] = {0.0f, 0.0f, 0.0f};
     for (size_t v = 0; v < vertex_count; ++v) {
-      for (int k = 0; k < 3; ++k) AppendRaw(out, mesh.positions[3 * v + k]);
-      for (int k = 0; k < 3; ++k) AppendRaw(out, has_normals ? mesh.normals[3 * v + k] : 0.0f);
+      at = PutRaw(at, &mesh.positions[3 * v], 12);
+      at = PutRaw(at, has_normals ? &mesh.normals[3 * v] : zeros, 12);
     }
     for (size_t t = 0; t < triangle_count; ++t) {
-      AppendRaw(out, uint8_t{3});
-      for (int k = 0; k < 3; ++k) AppendRaw(out, mesh.triangles[3 * t + k]);
-      AppendRaw(out, mesh.surface[t]);
+      *at++ = 3;
+      at = PutRaw(at, &mesh.triangles[3 * t], 12);
+      *at++ = char(mesh.surface[t]);
     }
     return absl::OkStatus();
   }
