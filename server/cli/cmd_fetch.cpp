@@ -163,8 +163,8 @@ CLI::App* AddFetchCommand(CLI::App& app, int* exit_code) {
                   "refuse a frame past this many triangles (default 2^26)")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
   cmd->add_option("--timeout-s", args->timeout_s,
-                  "fail unless the whole frame arrives within this many seconds, connecting "
-                  "included (default 60; 0: wait forever)")
+                  "each call (the volume's facts, then the whole frame) fails after this many "
+                  "seconds, connecting included (default 60; 0: wait forever)")
       ->check(CLI::Range(0, 86400));
   cmd->add_flag("--progressive", args->progressive, "let the server send a coarse frame first");
   cmd->add_option("-o,--output", args->output, "out.ply")->required();

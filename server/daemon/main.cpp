@@ -82,16 +82,16 @@ int Run(const DaemonConfig& config) {
         !ReadFile(config.tls_cert, &pair.cert_chain)) {
       spdlog::critical("cannot read TLS key '{}' or certificate '{}'", config.tls_key,
                        config.tls_cert);
-      return 1;
+      return 2;  // a configuration error, as a bad flag: restarting would not mend it
     }
     // gRPC reports a file that is not PEM only as a failure to listen, blaming the port.
     if (pair.cert_chain.find("-----BEGIN CERTIFICATE-----") == std::string::npos) {
       spdlog::critical("TLS certificate '{}' holds no PEM certificate", config.tls_cert);
-      return 1;
+      return 2;
     }
     if (pair.private_key.find("PRIVATE KEY-----") == std::string::npos) {
       spdlog::critical("TLS key '{}' holds no PEM private key", config.tls_key);
-      return 1;
+      return 2;
     }
     grpc::SslServerCredentialsOptions options;
     options.pem_key_cert_pairs.push_back(pair);
@@ -208,8 +208,9 @@ int main(int argc, char** argv) {
                                   "catalogue entry NAME=SPEC (repeatable); without any, built-in "
                                   "generators are served under their spec names");
   auto* o_threads = app.add_option("--threads", threads, "worker threads (0: all cores)");
-  auto* o_sessions = app.add_option("--max-sessions", max_sessions,
-                                    "concurrent Session/Extract streams (default 16)");
+  auto* o_sessions =
+      app.add_option("--max-sessions", max_sessions,
+                     "concurrent Session/Extract streams and volume-info calls (default 16)");
   auto* o_tris =
       app.add_option("--max-triangles", max_triangles, "triangles per frame (default 4000000)");
   auto* o_iso =

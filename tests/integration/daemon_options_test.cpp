@@ -663,14 +663,20 @@ TEST(DaemonStart, RefusesABusyPortAndFilesThatAreNotPem) {
   const std::string base = std::string("timeout 20 ") +
                            ::isostream::testing::ShellQuote(ISOSTREAMD_PATH) +
                            " --no-cache --listen 127.0.0.1:0 ";
+  // Files that cannot serve are configuration errors (exit 2: a service manager does not retry
+  // them); a pair that does not match shows only as a failed listen (exit 1, as a busy port).
+  r = RunCommand(base + "--tls-cert " + dir.path() + "/absent.pem --tls-key " + dir.path() +
+                 "/absent.key");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("cannot read TLS key"), std::string::npos) << r.output;
   r = RunCommand(base + "--tls-cert " + junk + " --tls-key " + (have_pair ? key : junk));
-  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("TLS certificate '" + junk + "' holds no PEM certificate"),
             std::string::npos)
       << r.output;
   if (!have_pair) GTEST_SKIP() << "openssl cannot make a test certificate";
   r = RunCommand(base + "--tls-cert " + cert + " --tls-key " + junk);
-  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("TLS key '" + junk + "' holds no PEM private key"), std::string::npos)
       << r.output;
   // A certificate with another pair's key: gRPC fails the listen, and the cause is named too.
