@@ -247,7 +247,14 @@ int Run(const Args& args) {
                  args.volume.c_str(), ShortestText(min_value).c_str());
     iso.push_back(min_value);
   } else if (args.iso.empty()) {
-    for (double f : {0.2, 0.4, 0.6}) iso.push_back(min_value + f * value_range);
+    // As the server holds them (float), distinct and above the lowest value (a crossing needs a
+    // corner below the isovalue): a range of a few float steps (float64 data far from 0) rounded
+    // them into one, "given twice". Fewer then, else the top value.
+    for (double f : {0.2, 0.4, 0.6}) {
+      const double v = double(static_cast<float>(min_value + f * value_range));
+      if (v > min_value && std::find(iso.begin(), iso.end(), v) == iso.end()) iso.push_back(v);
+    }
+    if (iso.empty()) iso.push_back(info->max_value());
   } else {
     auto parsed = ParseNumbers(args.iso, "--iso");
     if (!parsed.ok()) return Fail(parsed.status());

@@ -88,7 +88,9 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
   std::printf("spacing       %g %g %g\n", v.spacing[0], v.spacing[1], v.spacing[2]);
   std::printf("origin        %g %g %g\n", v.origin[0], v.origin[1], v.origin[2]);
   if (!v.orientation.empty()) std::printf("orientation   %s\n", v.orientation.c_str());
-  std::printf("value range   [%g, %g]\n", v.min_value, v.max_value);
+  // Every digit the samples hold: %g's six made 1e6 and 1e6 + 0.0625 one value.
+  std::printf("value range   [%s, %s]\n", ShortestText(v.min_value).c_str(),
+              ShortestText(v.max_value).c_str());
   std::printf("hierarchy     cube %d^3 (k = %d), %d bisection levels, %zu refinement vertices\n", n,
               h.k(), 3 * h.k(), h.point_count() - 8);
   std::printf("eta (root)    %g  (error bound of the 6 initial tetrahedra, data units)\n",

@@ -447,7 +447,8 @@ TEST(View, MisbehavingServersGiveClearErrors) {
 
 // Without --iso the viewer draws at 20, 40 and 60% of the value range: computed in float, a
 // range near +-FLT_MAX overflowed to "isovalue is not a finite number", and a constant volume
-// sent one value three times ("given twice"), though the user gave no isovalues at all.
+// sent one value three times ("given twice"), though the user gave no isovalues at all, as did
+// values four float steps apart (1e6 and 1e6 + 0.25: float64 data far from 0, rounded).
 TEST(View, DefaultIsovaluesForExtremeAndConstantVolumes) {
   testing::ScratchDir dir;
   auto raw = [&](const std::string& name, float a, float b) {
@@ -461,9 +462,10 @@ TEST(View, DefaultIsovaluesForExtremeAndConstantVolumes) {
   };
   testing::DaemonProcess daemon;
   ASSERT_TRUE(daemon.Start({"--no-cache", "--volume", raw("extreme", -3e38f, 3e38f), "--volume",
-                            raw("constant", 0.5f, 0.5f)},
+                            raw("constant", 0.5f, 0.5f), "--volume",
+                            raw("narrow", 1e6f, 1e6f + 0.25f)},
                            dir.path() + "/isostreamd.log"));
-  for (const std::string name : {"extreme", "constant"}) {
+  for (const std::string name : {"extreme", "constant", "narrow"}) {
     SCOPED_TRACE(name);
     const std::string png = dir.path() + "/" + name + ".png";
     const ViewRun r =
