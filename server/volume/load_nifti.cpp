@@ -80,17 +80,23 @@ absl::StatusOr<std::array<double, 3>> PixdimSteps(const HeaderView& h, const std
 // sform's matrix if it is set and usable, else the qform's rotation and offset with the pixdim
 // steps (pixdim[0] < 0 reverses the third axis), else the steps alone ("method 1", ANALYZE).
 // A damaged sform matrix or qform quaternion (not finite, singular) falls through to the next
-// (some writers fill in only the sform's offsets); a non-finite offset is taken as 0.
+// (some writers fill in only the sform's offsets); so does one whose offset is not finite, and
+// the offset is then 0.
 absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::array<int, 3>& dims,
                                             const std::string& path) {
   std::array<double, 3> offset{0, 0, 0};
   auto finite_offset = [&] {
-    for (double& o : offset)
-      if (!std::isfinite(o)) o = 0;
+    if (std::isfinite(offset[0]) && std::isfinite(offset[1]) && std::isfinite(offset[2]))
+      return true;
+    offset = {0, 0, 0};
+    return false;
   };
   // Why a set sform or qform was passed over: said beside the placement (`info` shows it), as a
   // file placed by other fields than its writer meant may lie elsewhere than expected.
   std::string passed_over;
+  auto pass_over = [&](const std::string& why) {
+    passed_over += (passed_over.empty() ? "" : "; ") + why;
+  };
   auto placed_by = [&](absl::StatusOr<Orientation> o, const char* by) {
     if (o.ok() && !passed_over.empty()) o->fallback = passed_over + "; placed by " + by;
     return o;
@@ -101,19 +107,26 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
       for (int i = 0; i < 3; ++i) srow[r][i] = h.F32(kSrowOffset + 16 * r + 4 * i);
       offset[r] = h.F32(kSrowOffset + 16 * r + 12);
     }
-    finite_offset();
-    absl::StatusOr<Orientation> o = NearestAxes(srow, offset, dims);
-    if (o.ok()) return o;
-    passed_over = "the sform is unusable (" + std::string(o.status().message()) + ")";
+    if (finite_offset()) {
+      absl::StatusOr<Orientation> o = NearestAxes(srow, offset, dims);
+      if (o.ok()) return o;
+      pass_over("the sform is unusable (" + std::string(o.status().message()) + ")");
+    } else {
+      pass_over("the sform is unusable (its offset is not a finite number)");
+    }
   }
   ISOSTREAM_ASSIGN_OR_RETURN(const auto steps, PixdimSteps(h, path));
-  if (h.I16(kQformCodeOffset) > 0) {  // its offset stands even if its rotation is damaged
+  bool qform = h.I16(kQformCodeOffset) > 0;
+  if (qform) {  // its offset stands even if its rotation is damaged
     for (int r = 0; r < 3; ++r) offset[r] = h.F32(kQoffsetOffset + 4 * r);
-    finite_offset();
+    if (!finite_offset()) {
+      pass_over("the qform is unusable (its offset is not a finite number)");
+      qform = false;
+    }
   }
   double b = h.F32(kQuaternOffset), c = h.F32(kQuaternOffset + 4), d = h.F32(kQuaternOffset + 8);
   const bool quaternion_finite = std::isfinite(b) && std::isfinite(c) && std::isfinite(d);
-  if (h.I16(kQformCodeOffset) > 0 && quaternion_finite) {
+  if (qform && quaternion_finite) {
     double a2 = 1 - (b * b + c * c + d * d);
     if (a2 < 1e-7) {  // a 180-degree turn, rounded past the unit sphere: normalise (b, c, d)
       const double norm = std::sqrt(b * b + c * c + d * d);
@@ -131,11 +144,9 @@ absl::StatusOr<Orientation> FileOrientation(const HeaderView& h, const std::arra
       for (int i = 0; i < 3; ++i) q[r][i] = rotation[r][i] * steps[i] * (i == 2 ? qfac : 1);
     absl::StatusOr<Orientation> o = NearestAxes(q, offset, dims);
     if (o.ok()) return placed_by(std::move(o), "the qform");
-    passed_over += std::string(passed_over.empty() ? "" : "; ") + "the qform is unusable (" +
-                   std::string(o.status().message()) + ")";
-  } else if (h.I16(kQformCodeOffset) > 0) {
-    passed_over += std::string(passed_over.empty() ? "" : "; ") +
-                   "the qform is unusable (its quaternion is not finite)";
+    pass_over("the qform is unusable (" + std::string(o.status().message()) + ")");
+  } else if (qform) {
+    pass_over("the qform is unusable (its quaternion is not finite)");
   }
   std::array<std::array<double, 3>, 3> diagonal{};
   for (int i = 0; i < 3; ++i) diagonal[i][i] = steps[i];
@@ -209,11 +220,17 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
   layout.dims = {dim[1], dim[2], dim[3]};
   layout.big_endian = swap != (__BYTE_ORDER__ == __ORDER_BIG_ENDIAN__);
 
-  // nifti1.h: scaling applies only when scl_slope is nonzero (and, sensibly, finite).
+  // nifti1.h: scaling applies only when scl_slope is nonzero (a NaN one, as some writers leave
+  // it, is none too). Applied, an infinite slope or an intercept that is not a finite number
+  // would make every sample so: a damaged header.
   const float slope = h.F32(kSclSlopeOffset), inter = h.F32(kSclInterOffset);
-  if (slope != 0 && std::isfinite(slope)) {
+  if (slope != 0 && !std::isnan(slope)) {
+    if (!std::isfinite(slope) || !std::isfinite(inter))
+      return absl::InvalidArgumentError(path + ": scl_slope " + ShortestText(slope) +
+                                        " and scl_inter " + ShortestText(inter) +
+                                        " do not scale samples to numbers");
     layout.slope = slope;
-    layout.inter = std::isfinite(inter) ? inter : 0.0;
+    layout.inter = inter;
   }
 
   ISOSTREAM_ASSIGN_OR_RETURN(const Orientation orientation, FileOrientation(h, layout.dims, path));
@@ -223,12 +240,15 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
   ISOSTREAM_RETURN_IF_ERROR(
       CheckWorldBox(orientation.dims, orientation.spacing, orientation.origin, path));
 
-  const float vox_offset = h.F32(kVoxOffsetOffset);
-  if (!(vox_offset >= kHeaderSize) || vox_offset > 1e9f) {
-    return absl::InvalidArgumentError(path + ": vox_offset " + ShortestText(vox_offset) +
-                                      (vox_offset > 1e9f ? " is past any file this loader reads"
-                                                         : " is not past the 348-byte header"));
+  float vox_offset = h.F32(kVoxOffsetOffset);
+  if (!(vox_offset >= 0) || vox_offset > 1e9f) {
+    return absl::InvalidArgumentError(
+        path + ": vox_offset " + ShortestText(vox_offset) +
+        (vox_offset > 1e9f ? " is past any file this loader reads" : " is not a byte offset"));
   }
+  // A .nii's data follow the header and its 4 extension bytes at least: nifti1_io reads a
+  // smaller vox_offset as 352 (read as given, 348-351 took the samples from those bytes).
+  vox_offset = std::max(vox_offset, float(kHeaderSize + 4));
   ISOSTREAM_RETURN_IF_ERROR(input.Skip(static_cast<size_t>(vox_offset) - kHeaderSize));
 
   std::string grid_name = path.substr(path.find_last_of('/') + 1);

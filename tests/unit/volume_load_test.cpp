@@ -84,6 +84,52 @@ TEST(VolumeLoadNifti, ScalingOffsetOriginAndFourthDim) {
   EXPECT_EQ((*v)->origin, (std::array<double, 3>{1, 2, 3}));
 }
 
+// The data of a .nii start at 352 at the earliest (nifti1_io reads a smaller vox_offset so):
+// read as given, 348-351 took samples from the extension bytes.
+TEST(VolumeLoadNifti, VoxOffsetBelow352ReadsFrom352) {
+  const NiftiFile nf;
+  const std::vector<unsigned char> file =
+      Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false));
+  for (const float given : {0.0f, 348.0f, 351.0f}) {
+    SCOPED_TRACE(given);
+    std::vector<unsigned char> bytes = file;
+    PutAt<float>(bytes, 108, given, false);
+    const std::string path = ScratchPath("vox_offset.nii");
+    WriteBytes(path, bytes);
+    absl::StatusOr<VolumePtr> v = LoadVolume(path);
+    ASSERT_TRUE(v.ok()) << v.status();
+    ExpectSamples(**v, [](int64_t i) { return float(StoredValue(Type::kFloat32, i)); });
+  }
+  std::vector<unsigned char> bytes = file;
+  PutAt<float>(bytes, 108, -4.0f, false);
+  const std::string path = ScratchPath("vox_offset.nii");
+  WriteBytes(path, bytes);
+  absl::StatusOr<VolumePtr> v = LoadVolume(path);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(v.status().message().find("vox_offset -4 is not a byte offset"), std::string::npos)
+      << v.status();
+}
+
+// Scaling that cannot give numbers is a damaged header (it applied the slope and took a NaN
+// intercept as 0); a NaN slope is "no scaling", as some writers leave it.
+TEST(VolumeLoadNifti, ScalingThatIsNotANumber) {
+  NiftiFile nf;
+  nf.slope = NAN;
+  nf.inter = 5;
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "slope_nan.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  ExpectSamples(**v, [](int64_t i) { return float(StoredValue(Type::kFloat32, i)); });
+  for (const auto& [slope, inter] :
+       {std::pair{2.0f, NAN}, std::pair{2.0f, INFINITY}, std::pair{INFINITY, 0.0f}}) {
+    nf.slope = slope;
+    nf.inter = inter;
+    v = WriteAndLoad(nf, "scaling.nii");
+    ASSERT_FALSE(v.ok());
+    EXPECT_NE(v.status().message().find("do not scale samples to numbers"), std::string::npos)
+        << v.status();
+  }
+}
+
 TEST(VolumeLoadNifti, BigEndian) {
   for (const auto& [datatype, type] :
        {std::pair<int16_t, Type>{4, Type::kInt16}, std::pair<int16_t, Type>{64, Type::kFloat64}}) {

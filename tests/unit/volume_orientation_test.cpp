@@ -150,6 +150,39 @@ TEST(VolumeOrientation, UnusableSformFallsBack) {
   EXPECT_EQ((*v)->orientation, "");
 }
 
+// An sform or qform whose offset is not a number (or infinite) is passed over as a damaged
+// matrix is, and said: it was placed at 0 silently.
+TEST(VolumeOrientation, NonFiniteOffsetsAreSaid) {
+  for (const float bad : {NAN, INFINITY}) {
+    SCOPED_TRACE(bad);
+    NiftiFile nf;
+    nf.sform_code = 1;
+    nf.pixdim = {2, 2, 2};
+    nf.sform_offset = {1, bad, 3};
+    absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "bad_sform_offset.nii");
+    ASSERT_TRUE(v.ok()) << v.status();
+    EXPECT_EQ((*v)->origin, (std::array<double, 3>{0, 0, 0}));
+    EXPECT_EQ((*v)->orientation,
+              "the sform is unusable (its offset is not a finite number); placed by pixdim's "
+              "steps at the header's offset");
+    nf.qform_code = 1;
+    nf.qoffset = {bad, 5, 6};
+    v = WriteAndLoad(nf, "bad_qform_offset.nii");
+    ASSERT_TRUE(v.ok()) << v.status();
+    EXPECT_EQ((*v)->origin, (std::array<double, 3>{0, 0, 0}));
+    EXPECT_EQ((*v)->orientation,
+              "the sform is unusable (its offset is not a finite number); the qform is unusable "
+              "(its offset is not a finite number); placed by pixdim's steps at the header's "
+              "offset");
+    // A good sform does not need the qform.
+    nf.sform_offset = {1, 2, 3};
+    v = WriteAndLoad(nf, "good_sform_bad_qform.nii");
+    ASSERT_TRUE(v.ok()) << v.status();
+    EXPECT_EQ((*v)->origin, (std::array<double, 3>{1, 2, 3}));
+    EXPECT_EQ((*v)->orientation, "");
+  }
+}
+
 TEST(VolumeOrientation, NearestAxesRefusesSingularAndNonFiniteMatrices) {
   const std::array<int, 3> dims{2, 2, 2};
   EXPECT_FALSE(NearestAxes(Matrix{{{1, 0, 0}, {0, 1, 0}, {0, 0, 0}}}, {0, 0, 0}, dims).ok());
