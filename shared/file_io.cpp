@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <climits>
@@ -13,6 +14,7 @@
 #include <cstring>
 #include <iostream>
 #include <memory>
+#include <optional>
 
 namespace isostream {
 namespace {
@@ -30,6 +32,63 @@ bool WriteAndClose(std::FILE* file, std::string_view bytes) {
   const bool closed = std::fclose(file) == 0;
   if (!written) errno = error;
   return written && closed;
+}
+
+// Partial files' names: one no other writer in this process or another uses.
+std::string PartialName(const std::string& target) {
+  static std::atomic<unsigned> serial{0};
+  return absl::StrCat(target, ".partial-", ::getpid(), "-", serial.fetch_add(1));
+}
+
+// Writes `bytes` into a file without a name in the target's folder (O_TMPFILE), then names it
+// `target`: killed before that (Ctrl-C, a kill, a crash, a file size limit), the process leaves
+// nothing behind, where a named partial file stayed. nullopt where that cannot be done (a file
+// system without unnamed files, no /proc, a name too long): nothing was named then.
+std::optional<absl::Status> WriteUnnamedThenName(const std::string& target, const std::string& path,
+                                                 std::string_view bytes, bool keep_mode,
+                                                 mode_t mode) {
+  const size_t slash = target.rfind('/');
+  const std::string folder = slash == std::string::npos ? "."
+                             : slash == 0               ? "/"
+                                                        : target.substr(0, slash);
+  const int fd = ::open(folder.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0666);
+  if (fd < 0) return std::nullopt;
+  const auto failed = [&](int error) {
+    ::close(fd);
+    return absl::ErrnoToStatus(error, absl::StrCat("cannot write ", path));
+  };
+  if (keep_mode) (void)::fchmod(fd, mode);  // a file made private stays private when replaced
+  for (size_t done = 0; done < bytes.size();) {
+    const ssize_t n =
+        ::write(fd, bytes.data() + done, std::min<size_t>(bytes.size() - done, 1 << 30));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return failed(n < 0 ? errno : EIO);
+    done += size_t(n);
+  }
+  const std::string self = absl::StrCat("/proc/self/fd/", fd);
+  // A new name is made whole at once; an existing file is replaced by a rename, which a link
+  // cannot do, from a name beside it that exists only between the two calls.
+  if (::linkat(AT_FDCWD, self.c_str(), AT_FDCWD, target.c_str(), AT_SYMLINK_FOLLOW) == 0)
+    return ::close(fd) == 0 ? absl::OkStatus() : failed(errno);
+  if (errno != EEXIST) {
+    ::close(fd);
+    return std::nullopt;
+  }
+  const std::string partial = PartialName(target);
+  if (::linkat(AT_FDCWD, self.c_str(), AT_FDCWD, partial.c_str(), AT_SYMLINK_FOLLOW) != 0) {
+    ::close(fd);
+    return std::nullopt;
+  }
+  if (::close(fd) != 0) {
+    const int error = errno;
+    ::unlink(partial.c_str());
+    return absl::ErrnoToStatus(error, absl::StrCat("cannot write ", path));
+  }
+  if (::rename(partial.c_str(), target.c_str()) != 0) {
+    ::unlink(partial.c_str());
+    return std::nullopt;
+  }
+  return absl::OkStatus();
 }
 
 absl::Status WriteInPlace(const std::string& path, std::string_view bytes) {
@@ -78,11 +137,12 @@ absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
     if (::realpath(path.c_str(), resolved) == nullptr) return WriteInPlace(path, bytes);
     target = resolved;
   }
-  // Beside the target, so the rename stays within one file system; O_EXCL with a name no other
-  // writer in this process or another uses. Mode 0666 less the umask, as fopen would create.
-  static std::atomic<unsigned> serial{0};
-  const std::string partial =
-      absl::StrCat(target, ".partial-", ::getpid(), "-", serial.fetch_add(1));
+  if (std::optional<absl::Status> written =
+          WriteUnnamedThenName(target, path, bytes, exists, previous_mode))
+    return *written;
+  // Else a named partial file beside the target, so the rename stays within one file system;
+  // O_EXCL. Mode 0666 less the umask, as fopen would create.
+  const std::string partial = PartialName(target);
   const int fd = ::open(partial.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
   if (fd < 0) {
     if (errno == EACCES || errno == EROFS || errno == EPERM || errno == ENAMETOOLONG)
@@ -126,8 +186,8 @@ absl::Status CheckOutputPath(const std::string& path) {
     return absl::PermissionDeniedError(absl::StrCat("cannot write ", path, ": not writable"));
   }
   if (::access(folder.c_str(), W_OK) == 0) return absl::OkStatus();
-  return absl::PermissionDeniedError(absl::StrCat("cannot create ", path, ": ", folder,
-                                                  " is not writable"));
+  return absl::PermissionDeniedError(
+      absl::StrCat("cannot create ", path, ": ", folder, " is not writable"));
 }
 
 bool FlushStandardOutput(const char* program) {

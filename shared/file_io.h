@@ -15,7 +15,8 @@ absl::StatusOr<std::string> ReadFileBytes(const std::string& path);
 
 // Writes `bytes` as the file at `path`, whole or not at all: into a new file beside it, renamed
 // over `path` once complete, so a failed write (a full disk, a file size limit) leaves the
-// previous file as it was and no partial one. A symbolic link's target is replaced, the link
+// previous file as it was and no partial one. The new file has no name until then where the
+// file system allows (O_TMPFILE), so a process killed while writing leaves none either. A symbolic link's target is replaced, the link
 // kept, and a replaced file's permissions. Written in place instead: what is not a regular file
 // (/dev/null, a FIFO), a link to nothing yet, a file with other hard links or of another
 // owner, and a file in a folder where no new file can be made or renamed. A file we may not

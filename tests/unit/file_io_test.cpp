@@ -3,6 +3,7 @@
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -56,6 +57,38 @@ TEST_F(FileIo, AFailedWriteLeavesThePreviousFileAndNoPartOfTheNewOne) {
   ASSERT_TRUE(kept.ok()) << kept.status();
   EXPECT_EQ(*kept, "the previous mesh");
   EXPECT_EQ(Names(), std::vector<std::string>{"mesh.ply"});
+}
+
+// A process killed while it writes (here by SIGXFSZ's default action; Ctrl-C or a kill alike)
+// leaves the previous file whole and nothing beside it: `extract -o` interrupted left 60 MB
+// .partial files.
+TEST_F(FileIo, AProcessKilledWhileWritingLeavesNothingBehind) {
+  for (const bool existed : {false, true}) {
+    SCOPED_TRACE(existed);
+    const std::string path = Path("mesh.ply");
+    if (existed) {
+      ASSERT_TRUE(WriteFileBytes(path, "the previous mesh").ok());
+    }
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      const rlimit small = {4096, RLIM_INFINITY};
+      signal(SIGXFSZ, SIG_DFL);
+      setrlimit(RLIMIT_FSIZE, &small);
+      (void)WriteFileBytes(path, std::string(1 << 16, 'x'));
+      _exit(0);  // not reached: the write past the limit kills the process
+    }
+    int status = 0;
+    ASSERT_EQ(waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFSIGNALED(status)) << status;
+    EXPECT_EQ(WTERMSIG(status), SIGXFSZ);
+    if (existed) {
+      EXPECT_EQ(*ReadFileBytes(path), "the previous mesh");
+      EXPECT_EQ(Names(), std::vector<std::string>{"mesh.ply"});
+    } else {
+      EXPECT_EQ(Names(), std::vector<std::string>{});
+    }
+  }
 }
 
 TEST_F(FileIo, ReplacesAFileWholeAndKeepsItsMode) {
