@@ -2,6 +2,8 @@
 // that reads it (budget_search.h): the curve equals a separate count at every eta code, and
 // the search finds the exact smallest code that fits, on real hierarchies and on synthetic
 // count functions (power laws, plateaus over many octaves, cliffs).
+#include "server/extract/budget_search.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,7 +12,6 @@
 #include <optional>
 #include <vector>
 
-#include "server/extract/budget_search.h"
 #include "server/extract/extractor.h"
 #include "test_volumes.h"
 
@@ -23,6 +24,7 @@ using extract_internal::FindBudgetCode;
 using testing::BlobsField;
 using testing::CayleyField;
 using testing::MakeHierarchy;
+using testing::SphereField;
 
 ExtractRequest Request(std::vector<float> iso) {
   ExtractRequest r;
@@ -48,11 +50,11 @@ TEST(EtaCodes, EdgesAndCodesRoundTrip) {
 
 TEST(CountCurve, SumsIntervalsClippedToItsRange) {
   CountCurve curve(10, 20);
-  curve.Add(0, 12, 5);       // clipped to [10, 12]
-  curve.Add(15, 15, 7);      // one code
-  curve.Add(18, 100, 1);     // clipped to [18, 20]
-  curve.Add(21, 30, 1000);   // outside
-  curve.Add(14, 13, 1000);   // empty
+  curve.Add(0, 12, 5);      // clipped to [10, 12]
+  curve.Add(15, 15, 7);     // one code
+  curve.Add(18, 100, 1);    // clipped to [18, 20]
+  curve.Add(21, 30, 1000);  // outside
+  curve.Add(14, 13, 1000);  // empty
   const std::vector<int64_t> want = {5, 5, 5, 0, 0, 7, 0, 0, 1, 1, 1};
   EXPECT_EQ(curve.Counts(), want);
 }
@@ -85,6 +87,15 @@ TEST(CountCurve, EqualsACountAtEveryCode) {
           CountTriangles(*h, GridToWorld{}, r, 0.5 * (EtaCodeEps(mid) + EtaCodeEps(mid + 1)));
       ASSERT_TRUE(between.ok());
       EXPECT_EQ(*between, (*curve)[mid + 1 - first]);
+      // So is it just above a code's edge: eps is rounded up to a float, never down (a request's
+      // eps in double one step above an edge counted as the edge's code).
+      if (first == 0) continue;  // the same codes as from 1e-3
+      for (uint32_t code = first; code < top; code += 3) {
+        const double above = std::nextafter(EtaCodeEps(code), INFINITY);
+        auto n = CountTriangles(*h, GridToWorld{}, r, above);
+        ASSERT_TRUE(n.ok());
+        ASSERT_EQ(*n, (*curve)[code + 1 - first]) << "eps " << above;
+      }
     }
   }
   EXPECT_FALSE(CountTrianglesPerEtaCode(*h, GridToWorld{}, Request({0.5f}), 10, 9).ok());
@@ -120,6 +131,46 @@ TEST(BudgetSearch, FindsTheExactSmallestCodeOnAHierarchy) {
       EXPECT_GT(*below, budget) << "eps " << EtaCodeEps(code - 1) << " fits too, budget " << budget;
     }
   }
+}
+
+// The same over fields, isovalue sets (near the data's ends too, where coarse leaves without a
+// crossing gain some below their eta) and budgets from a few triangles to nearly all: the
+// returned code fits (or is the coarsest) and the code below it does not.
+TEST(BudgetSearch, ExactOverFieldsIsovaluesAndBudgets) {
+  int cases = 0;
+  for (auto field : {BlobsField, CayleyField, SphereField}) {
+    for (int k : {4, 5}) {
+      const auto h = MakeHierarchy(k, field);
+      const uint32_t coarsest = CoarsestEtaCode(*h);
+      for (const std::vector<float>& iso : {std::vector<float>{0.5f},
+                                            {0.2f, 0.5f, 0.8f},
+                                            {0.0f, 0.3f},
+                                            {-0.5f, 0.1f},
+                                            {0.05f},
+                                            {0.95f, 1.3f}}) {
+        ExtractRequest r = Request(iso);
+        const int64_t full = *CountTriangles(*h, GridToWorld{}, r, 0.0);
+        for (double share : {0.003, 0.01, 0.03, 0.1, 0.35, 0.7, 0.99}) {
+          SCOPED_TRACE(::testing::Message()
+                       << "k " << k << " iso[0] " << iso[0] << " share " << share);
+          r.budget = std::max<int64_t>(1, int64_t(share * double(full)));
+          auto res = Extract(*h, GridToWorld{}, r);
+          ASSERT_TRUE(res.ok()) << res.status();
+          const uint32_t code = EtaCodeAtLeast(res->stats.eps_used);
+          if (code != coarsest) {
+            EXPECT_LE(res->stats.triangles, r.budget);
+          }
+          if (code > 0 && res->stats.triangles <= r.budget) {
+            auto below = CountTriangles(*h, GridToWorld{}, r, EtaCodeEps(code - 1));
+            ASSERT_TRUE(below.ok());
+            EXPECT_GT(*below, r.budget);
+          }
+          ++cases;
+        }
+      }
+    }
+  }
+  EXPECT_GT(cases, 200);
 }
 
 // A synthetic count function of the code, served to the search as passes would: the count at

@@ -655,9 +655,16 @@ TEST(Extract, BadRequestsGiveClearErrors) {
   EXPECT_EQ(code(r).code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(code(r).message().find("eps"), std::string::npos);
   r = ok;
-  r.isovalues.assign(17, 0.5f);
+  r.isovalues.clear();
+  for (int i = 0; i < 16; ++i) r.isovalues.push_back(0.05f * float(i + 1));
+  EXPECT_TRUE(code(r).ok()) << code(r);  // 16 are allowed: the limit is checked at its edge
+  r.isovalues.push_back(0.9f);
   EXPECT_EQ(code(r).code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(code(r).message().find("16"), std::string::npos);
+  r = ok;
+  r.threads = -1;
+  EXPECT_EQ(code(r).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(code(r).message().find("threads"), std::string::npos);
   r = ok;
   r.isovalues.clear();
   EXPECT_EQ(code(r).code(), absl::StatusCode::kInvalidArgument);

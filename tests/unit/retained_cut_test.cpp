@@ -227,6 +227,15 @@ TEST(RetainedCut, ServesOnlyTheSameMesh) {
   other.budget = 500;
   EXPECT_FALSE(cut.Serves(other));
   EXPECT_TRUE(cut.Serves(other, 0.01));  // a budget whose remembered eps is the cut's
+  // ... for the same surfaces only: a session alternating isovalue sets under a budget the
+  // whole mesh fits (eps 0 for both) must not be served the other set's mesh.
+  other.isovalues = {0.7f, 0.5f};
+  EXPECT_FALSE(cut.Serves(other, 0.01));
+  other.isovalues = {0.5f, 0.8f};
+  EXPECT_FALSE(cut.Serves(other, 0.01));
+  other.isovalues = r.isovalues;
+  other.normals = NormalMode::kFlat;
+  EXPECT_FALSE(cut.Serves(other, 0.01));
 
   // A budget request is served by a cut of the same budget.
   ExtractRequest budget = r;
