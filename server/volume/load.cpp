@@ -7,6 +7,7 @@
 #include "server/volume/generators.h"
 #include "server/volume/loaders.h"
 #include "server/volume/volume_spec.h"
+#include "shared/printable_text.h"
 
 namespace isostream {
 namespace {
@@ -27,11 +28,9 @@ absl::StatusOr<VolumePtr> LoadFromSpec(std::string_view spec, const VolumeLimits
   return absl::InternalError(parsed.text + ": no loader for this source");
 }
 
-}  // namespace
-
-absl::StatusOr<VolumePtr> LoadVolume(std::string_view spec, const VolumeLimits& limits,
-                                     const std::atomic<bool>* stop) {
-  // The module edge: nothing thrown by OpenVDB, TBB or the standard library gets past here.
+// The module edge: nothing thrown by OpenVDB, TBB or the standard library gets past here.
+absl::StatusOr<VolumePtr> LoadGuarded(std::string_view spec, const VolumeLimits& limits,
+                                      const std::atomic<bool>* stop) {
   try {
     return LoadFromSpec(spec, limits, stop);
   } catch (const std::bad_alloc&) {
@@ -41,6 +40,21 @@ absl::StatusOr<VolumePtr> LoadVolume(std::string_view spec, const VolumeLimits& 
   } catch (...) {
     return absl::UnknownError(std::string(spec) + ": unknown exception while loading");
   }
+}
+
+}  // namespace
+
+absl::StatusOr<VolumePtr> LoadVolume(std::string_view spec, const VolumeLimits& limits,
+                                     const std::atomic<bool>* stop) {
+  absl::StatusOr<VolumePtr> loaded = LoadGuarded(spec, limits, stop);
+  // Messages quote the file (grid, metadata and transform names, OpenVDB's words about them):
+  // printable, so a file cannot write lines of its own into the daemon's log or a terminal.
+  if (!loaded.ok()) {
+    const absl::string_view message = loaded.status().message();
+    return absl::Status(loaded.status().code(),
+                        PrintableText(std::string_view(message.data(), message.size())));
+  }
+  return loaded;
 }
 
 }  // namespace isostream

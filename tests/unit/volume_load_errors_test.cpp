@@ -71,6 +71,24 @@ TEST(VolumeLoadErrors, WrongMagic) {
 // Each fault the structure walk knows, from the header to a leaf's value chunk, is refused before
 // OpenVDB reads the file (it would allocate what a count claims, loop on it, or overflow a
 // buffer): DataLoss naming the byte and the fault.
+// A name in the file reaches the message escaped: a transform named "Z\n[FAKE]..." wrote a
+// line of its own into the daemon's log, and escape sequences reached the terminal.
+TEST(VolumeLoadErrors, NamesFromTheFileArePrintedEscaped) {
+  std::vector<unsigned char> bytes = ReadBytes(WriteVdb("inject.vdb", {TestGrid("density", 1.0f)}));
+  const std::string map = "ScaleTranslateMap", forged = "Z\n[FAKE]\x1b[31mpwn!";
+  ASSERT_EQ(forged.size(), map.size());
+  const auto at = std::search(bytes.begin(), bytes.end(), map.begin(), map.end());
+  ASSERT_NE(at, bytes.end());
+  std::copy(forged.begin(), forged.end(), at);
+  const std::string path = ScratchPath("inject.vdb");
+  WriteBytes(path, bytes);
+  const absl::StatusOr<VolumePtr> v = LoadVolume(path);
+  ASSERT_FALSE(v.ok());
+  const std::string message(v.status().message());
+  EXPECT_NE(message.find("Z\\x0a[FAKE]\\x1b[31mpwn!"), std::string::npos) << message;
+  EXPECT_EQ(message.find_first_of("\n\x1b"), std::string::npos) << message;
+}
+
 TEST(VolumeLoadErrors, DamagedVdbFraming) {
   const std::vector<unsigned char> good =
       ReadBytes(WriteVdb("framing.vdb", {TestGrid("density", 1.0f)}));
