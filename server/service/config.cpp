@@ -15,6 +15,7 @@
 #include "server/volume/volume_spec.h"
 #include "shared/frame_codec.h"
 #include "shared/number_list.h"
+#include "shared/printable_text.h"
 
 namespace isostream::service {
 namespace {
@@ -130,6 +131,26 @@ absl::Status Parse(const json& j, DaemonConfig* c) {
   return absl::OkStatus();
 }
 
+// Where and why `text` is not JSON, from the parser's exception (the non-throwing parse says
+// only that it failed): "'x.json' is not valid JSON: parse error at line 3, column 5: ...".
+std::string JsonError(const std::string& path, const std::string& text) {
+  std::string why;
+  try {
+    const json parsed = json::parse(text);  // throws where the non-throwing parse failed
+    (void)parsed;
+  } catch (const json::parse_error& e) {
+    why = e.what();
+    // "[json.exception.parse_error.101] parse error at ...": the bracketed id means nothing to
+    // whoever wrote the file.
+    if (const size_t id_end = why.find("] ");
+        why.rfind("[json.", 0) == 0 && id_end != std::string::npos)
+      why.erase(0, id_end + 2);
+  } catch (const std::exception& e) {
+    why = e.what();
+  }
+  return "'" + path + "' is not valid JSON" + (why.empty() ? "" : ": " + why);
+}
+
 }  // namespace
 
 int FirstChunkTriangles(const DaemonConfig& c) {
@@ -158,11 +179,15 @@ absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
     return true;
   };
   const json j = json::parse(text.str(), note_keys, /*allow_exceptions=*/false);
-  if (j.is_discarded()) return absl::InvalidArgumentError("'" + path + "' is not valid JSON");
+  // Messages quote the file (keys, values, the bytes a parse stopped at): printed escaped.
+  if (j.is_discarded())
+    return absl::InvalidArgumentError(PrintableText(JsonError(path, text.str())));
   if (!repeated.empty())
-    return absl::InvalidArgumentError(path + ": key '" + repeated + "' is given twice");
+    return absl::InvalidArgumentError(
+        PrintableText(path + ": key '" + repeated + "' is given twice"));
   const absl::Status s = Parse(j, config);
-  if (!s.ok()) return absl::InvalidArgumentError(path + ": " + std::string(s.message()));
+  if (!s.ok())
+    return absl::InvalidArgumentError(PrintableText(path + ": " + std::string(s.message())));
   return absl::OkStatus();
 }
 

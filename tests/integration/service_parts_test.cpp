@@ -146,6 +146,14 @@ TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
   s = LoadText(R"({"threads": "two"})", &c);
   EXPECT_NE(s.message().find("threads"), std::string::npos) << s;
   EXPECT_EQ(LoadText("{not json", &c).code(), absl::StatusCode::kInvalidArgument);
+  // Where the text stops being JSON, and what the file holds there, printed escaped.
+  s = LoadText("{\n  \"threads\": 2,\n  \"listen\": \"127.0.0.1:1\"\n  \"token\": 1\n}", &c);
+  EXPECT_NE(s.message().find("is not valid JSON: parse error at line 4, column 9"),
+            std::string::npos)
+      << s;
+  EXPECT_EQ(s.message().find("json.exception"), std::string::npos) << s;
+  s = LoadText(R"({"a\u001b[2Jb": 1, "a\u001b[2Jb": 2})", &c);
+  EXPECT_NE(s.message().find("key 'a\\x1b[2Jb' is given twice"), std::string::npos) << s;
   EXPECT_EQ(LoadConfigFile("/nonexistent/x.json", &c).code(), absl::StatusCode::kNotFound);
 
   DaemonConfig bad;
