@@ -4,6 +4,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <string>
@@ -18,17 +19,27 @@ inline CLI::Validator GivenNumber() {
 
 // The same for counts, which also take a whole number written with an exponent or a point
 // ("--budget 1e6", "2.5e5"): rewritten as digits before CLI11 converts it, which refused them.
-// Anything else is left for CLI11 to refuse. A transform, not a check: checks see a copy.
+// A count that is not whole, or past 2^63 - 1, is refused here by name (CLI11 said only "Could
+// not convert", and took 99999999999999999999 as the largest count silently). Other text is
+// left for CLI11 to refuse. A transform, not a check: checks see a copy.
 inline CLI::Validator GivenCount() {
   return CLI::Validator(
       [](std::string& text) {
         if (text.empty()) return std::string("a number is needed");
-        if (text.find_first_of("eE.") == std::string::npos) return std::string();
         char* end = nullptr;
+        if (text.find_first_of("eE.") == std::string::npos) {
+          errno = 0;
+          (void)std::strtoll(text.c_str(), &end, 10);
+          if (end != text.c_str() && *end == '\0' && errno == ERANGE)
+            return text + " is past the largest count, 2^63 - 1";
+          return std::string();
+        }
         const double v = std::strtod(text.c_str(), &end);
-        if (end != text.c_str() && *end == '\0' && std::isfinite(v) && v == std::floor(v) &&
-            std::abs(v) < 9223372036854775808.0)  // 2^63: every such whole double fits
-          text = std::to_string(static_cast<long long>(v));
+        if (end == text.c_str() || *end != '\0' || std::isnan(v)) return std::string();
+        if (v != std::floor(v)) return text + " is not a whole number";
+        if (!(std::abs(v) < 9223372036854775808.0))  // 2^63: every smaller whole double fits
+          return text + " is past the largest count, 2^63 - 1";
+        text = std::to_string(static_cast<long long>(v));
         return std::string();
       },
       "COUNT");

@@ -288,7 +288,16 @@ TEST(Cli, BudgetsWithAnExponent) {
   const CliRun exponent = Cli(args + "1e3");
   EXPECT_EQ(exponent.code, 0) << exponent.output;
   EXPECT_EQ(exponent.output, plain.output);
-  EXPECT_NE(Cli(args + "1.5").code, 0);
+  // Counts that are not whole or pass int64's end are refused by name (CLI11 said "Could not
+  // convert", and took 99999999999999999999 as the largest count silently).
+  for (const auto& [given, says] :
+       {std::pair<std::string, std::string>{"1.5", "1.5 is not a whole number"},
+        {"1e19", "1e19 is past the largest count"},
+        {"99999999999999999999", "99999999999999999999 is past the largest count"}}) {
+    const CliRun bad = Cli(args + given);
+    EXPECT_EQ(bad.code, 2) << bad.output;
+    EXPECT_NE(bad.output.find(says), std::string::npos) << bad.output;
+  }
   // Up to int64's end: 9e18 (below 2^63) was refused as "Could not convert".
   const CliRun near_end = Cli(args + "9.2e18");
   EXPECT_EQ(near_end.code, 0) << near_end.output;
