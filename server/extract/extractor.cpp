@@ -8,6 +8,7 @@
 #include "server/extract/extractor.h"
 
 #include <tbb/enumerable_thread_specific.h>
+#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -77,6 +78,12 @@ namespace {
 double Ms(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since)
       .count();
+}
+
+// Threads past the cores' count only contend (and TBB warns on stderr that it ignores them).
+int ArenaSize(int threads) {
+  return threads > 0 ? std::min(threads, tbb::info::default_concurrency())
+                     : int(tbb::task_arena::automatic);
 }
 
 Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequest& r,
@@ -262,7 +269,7 @@ absl::StatusOr<int64_t> CountTriangles(const Hierarchy& h, const GridToWorld& xf
                                        const ExtractRequest& r, double eps, int64_t limit) {
   ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
   const Context c = MakeContext(h, xf, r, eps);
-  tbb::task_arena arena(r.threads > 0 ? r.threads : tbb::task_arena::automatic);
+  tbb::task_arena arena(ArenaSize(r.threads));
   return arena.execute([&] { return CountAt(c, limit); });
 }
 
@@ -295,7 +302,7 @@ absl::StatusOr<std::vector<int64_t>> CountTrianglesPerEtaCode(const Hierarchy& h
   Context c = MakeContext(h, xf, r, EtaCodeEps(first_code));
   c.block_level = -1;
   CountCurve curve(first_code, last_code);
-  tbb::task_arena arena(r.threads > 0 ? r.threads : tbb::task_arena::automatic);
+  tbb::task_arena arena(ArenaSize(r.threads));
   arena.execute([&] { CountAt(c, INT64_MAX, nullptr, nullptr, &curve); });
   return curve.Counts();
 }
@@ -308,7 +315,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
   const auto t_start = std::chrono::steady_clock::now();
   ExtractResult result;
   ExtractStats& st = result.stats;
-  tbb::task_arena arena(r.threads > 0 ? r.threads : tbb::task_arena::automatic);
+  tbb::task_arena arena(ArenaSize(r.threads));
 
   double eps = r.eps;
   std::optional<double> remembered;

@@ -42,6 +42,7 @@
 
 #include <sys/mman.h>
 #include <tbb/blocked_range.h>
+#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -523,7 +524,10 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options) try {
   auto h = std::make_shared<Hierarchy>();
   ISOSTREAM_RETURN_IF_ERROR(h->SetUpStore(samples));
-  tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+  // Threads past the cores' count only contend (and TBB warns on stderr that it ignores them).
+  tbb::task_arena arena(options.threads > 0
+                            ? std::min(options.threads, tbb::info::default_concurrency())
+                            : int(tbb::task_arena::automatic));
   HierarchyBuilder builder(samples.k, samples.values.data(), h.get());
   bool finite = true;
   arena.execute([&] { finite = builder.Run(options); });

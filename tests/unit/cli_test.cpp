@@ -304,6 +304,18 @@ TEST(Cli, BudgetsWithAnExponent) {
   EXPECT_EQ(near_end.output, Cli(args + "9200000000000000000").output);
 }
 
+// More threads than cores: the same output, and nothing from TBB on stderr (it warned that it
+// ignored the extra ones).
+TEST(Cli, ThreadsPastTheCoresAreQuiet) {
+  const std::string args = "extract --volume sphere:17 --iso 0.5 --eps 0 --no-cache -o " +
+                           TempPath("cli-threads.ply") + " --threads ";
+  const CliRun one = Cli(args + "1");
+  const CliRun many = Cli(args + "1024");
+  EXPECT_EQ(many.code, 0) << many.output;
+  EXPECT_EQ(many.output, one.output);
+  EXPECT_EQ(many.output.find("TBB"), std::string::npos) << many.output;
+}
+
 // info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,
 // which is what extract --eps 0 writes.
 // What a command prints is its result: one that cannot be written is a failure (exit 1).
