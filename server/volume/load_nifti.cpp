@@ -191,10 +191,14 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
 
   int16_t dim[8];
   for (int i = 0; i < 8; ++i) dim[i] = h.I16(kDimOffset + 2 * i);
-  if (!(dim[0] == 3 || (dim[0] == 4 && dim[4] == 1))) {
-    return absl::InvalidArgumentError(path +
-                                      ": not a 3D volume (dim[0] = " + std::to_string(dim[0]) +
-                                      ", dim[4] = " + std::to_string(dim[4]) + ")");
+  // Three dimensions, or more of which those past the third are 1 (a single time point or
+  // component, as some writers store a 3D volume).
+  bool three_d = dim[0] >= 3 && dim[0] <= 7;
+  for (int i = 4; three_d && i <= dim[0]; ++i) three_d = dim[i] == 1;
+  if (!three_d) {
+    std::string dims = std::to_string(dim[0]);
+    for (int i = 1; i <= std::clamp<int>(dim[0], 0, 7); ++i) dims += ", " + std::to_string(dim[i]);
+    return absl::InvalidArgumentError(path + ": not a 3D volume (dim = " + dims + ")");
   }
   ISOSTREAM_RETURN_IF_ERROR(CheckDims({dim[1], dim[2], dim[3]}, limits, path));
 

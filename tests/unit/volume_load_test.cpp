@@ -130,6 +130,28 @@ TEST(VolumeLoadNifti, ScalingThatIsNotANumber) {
   }
 }
 
+// A 3D volume stored with more dimensions of extent 1 (dim = 5: x, y, z, 1, 1) loads; a second
+// time point or component anywhere past the third does not, naming the dims.
+TEST(VolumeLoadNifti, DimensionsPastTheThirdOfExtentOne) {
+  NiftiFile nf;
+  nf.dim0 = 5;
+  nf.dim4 = 1;
+  std::vector<unsigned char> file = Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false));
+  PutAt<int16_t>(file, 50, 1, false);  // dim[5]
+  const std::string path = ScratchPath("five_dims.nii");
+  WriteBytes(path, file);
+  absl::StatusOr<VolumePtr> v = LoadVolume(path);
+  ASSERT_TRUE(v.ok()) << v.status();
+  ExpectSamples(**v, [](int64_t i) { return float(StoredValue(Type::kFloat32, i)); });
+  PutAt<int16_t>(file, 50, 2, false);
+  WriteBytes(path, file);
+  v = LoadVolume(path);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(v.status().message().find("not a 3D volume (dim = 5, 5, 4, 3, 1, 2)"),
+            std::string::npos)
+      << v.status();
+}
+
 TEST(VolumeLoadNifti, BigEndian) {
   for (const auto& [datatype, type] :
        {std::pair<int16_t, Type>{4, Type::kInt16}, std::pair<int16_t, Type>{64, Type::kFloat64}}) {
