@@ -1,10 +1,10 @@
 // OpenVDB files: one float grid becomes a Volume over its active bounding box.
+#include <fcntl.h>
 #include <openvdb/io/File.h>
 #include <openvdb/io/Stream.h>
-#include <fcntl.h>
 #include <openvdb/math/Maps.h>
-#include <tbb/combinable.h>
 #include <sys/stat.h>
+#include <tbb/combinable.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -106,8 +106,8 @@ absl::StatusOr<VolumePtr> LoadVdbFile(const std::string& spec, const std::string
   return LoadVdbOpenFile(opened.fd, spec, path, grid_name, limits);
 }
 
-absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
-                                          const std::string& path, const std::string& grid_name,
+absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec, const std::string& path,
+                                          const std::string& grid_name,
                                           const VolumeLimits& limits) {
   InitializeOpenVdbOnce();
   // A foreign file is InvalidArgument, a damaged one DataLoss (OpenVDB reports both alike).
@@ -143,10 +143,16 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
   if (metadata->empty())
     return absl::DataLossError(path + ": holds no grids (an empty or truncated file)");
   if (chosen == nullptr) {
+    // What there is to choose from, name and type (the first 8).
+    std::string grids;
+    for (size_t i = 0; i < metadata->size() && i < 8; ++i) {
+      const openvdb::GridBase& g = *(*metadata)[i];
+      grids += (i > 0 ? ", '" : "'") + g.getName() + "' (" + g.type() + ")";
+    }
+    if (metadata->size() > 8) grids += ", ...";
     if (!grid_name.empty())
-      return absl::NotFoundError(path + ": no grid named '" + grid_name + "'");
-    return absl::InvalidArgumentError(path + ": no float grid (of " +
-                                      std::to_string(metadata->size()) + " grids)");
+      return absl::NotFoundError(path + ": no grid named '" + grid_name + "'; it holds " + grids);
+    return absl::InvalidArgumentError(path + ": no float grid; it holds " + grids);
   }
   if (!chosen->isType<openvdb::FloatGrid>()) {
     return absl::InvalidArgumentError(path + ": grid '" + grid_name + "' has unsupported type " +
@@ -225,7 +231,8 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec,
     std::snprintf(angle, sizeof(angle), "%.3g", orientation->off_axis_degrees);
     return absl::InvalidArgumentError(where +
                                       ": only axis-aligned transforms are supported (this one is "
-                                      "rotated " + angle + " degrees off the axes)");
+                                      "rotated " +
+                                      angle + " degrees off the axes)");
   }
   ISOSTREAM_RETURN_IF_ERROR(
       CheckWorldBox(orientation->dims, orientation->spacing, orientation->origin, where));
