@@ -34,6 +34,12 @@ int PrintCountsByEps(const PreparedVolume& prepared, ExtractRequest r,
               ms);
   std::printf("  %-16s  %s\n", "eps", "triangles");
   const int64_t full = (*counts)[0];
+  // The same count at every eps (no triangle anywhere, or data so flat the root's eta is 0,
+  // whose row read "9.183549615799121e-41  0"): one row says so.
+  if ((*counts)[top] == full) {
+    std::printf("  %-16s  %lld\n", "any", (long long)full);
+    return 0;
+  }
   uint32_t code = top;
   int64_t shown = -1;
   for (;; code = code > kEtaCodesPerOctave ? code - kEtaCodesPerOctave : 0) {
@@ -47,9 +53,8 @@ int PrintCountsByEps(const PreparedVolume& prepared, ExtractRequest r,
     // Past 99% of the full-resolution count the octaves add little: that count closes.
     if (code == 0 || 100 * (*counts)[code] >= 99 * full) break;
   }
-  // Closed by eps 0's count, unless no eps has any triangle (the one row says it all: the
-  // closing row repeated it).
-  if (code != 0 && full != 0) std::printf("  %-16s  %lld\n", "0", (long long)full);
+  // Closed by eps 0's count.
+  if (code != 0) std::printf("  %-16s  %lld\n", "0", (long long)full);
   return 0;
 }
 

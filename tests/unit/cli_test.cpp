@@ -361,6 +361,7 @@ TEST(Cli, InfoPrintsTheTriangleCountByEps) {
   ASSERT_EQ(none.code, 0) << none.output;
   const std::string none_rows = none.output.substr(none.output.find("  eps"));
   EXPECT_EQ(std::count(none_rows.begin(), none_rows.end(), '\n'), 2) << none.output;
+  EXPECT_NE(none_rows.find("\n  any               0\n"), std::string::npos) << none.output;
   const CliRun bad = Cli("info --volume buckyball:33 --iso 0.05,x --no-cache");
   EXPECT_EQ(bad.code, 2);
   EXPECT_NE(bad.output.find("'x' is not a number"), std::string::npos) << bad.output;
