@@ -310,16 +310,20 @@ absl::StatusOr<VolumePtr> ReadSamples(GzInput& input, const SampleLayout& layout
     DecodeSamples(layout, raw.data(), count, slab.data());
     absl::Status status = builder.AddSlab(s, slab.data());
     if (!status.ok()) {
-      // An infinite sample may be a finite stored value the header's scaling took past the
-      // float range: the scaling is named with it.
-      const bool scaled = (layout.slope != 1 || layout.inter != 0) &&
-                          absl::StartsWith(status.message(), "Inf sample");
+      // An infinite sample may be a finite stored value the header's scaling, or its float64
+      // type, took past the float range: said with it.
+      const bool inf = absl::StartsWith(status.message(), "Inf sample");
+      const bool scaled = inf && (layout.slope != 1 || layout.inter != 0);
+      const bool wide = inf && layout.type == SampleType::kFloat64;
       return absl::Status(
           status.code(),
           input.path() + ": " + std::string(status.message()) +
               (scaled ? " (samples scaled by scl_slope " + ShortestText(float(layout.slope)) +
                             ", scl_inter " + ShortestText(float(layout.inter)) + ")"
-                      : ""));
+                      : "") +
+              (wide ? " (or a float64 sample past the float range, +-3.4e38, where samples are "
+                      "held)"
+                    : ""));
     }
   }
   return builder.Finish(std::move(name), grid_name, spacing, origin);

@@ -500,6 +500,15 @@ TEST(VolumeLoadErrors, NonFiniteSamples) {
   WriteBytes(path, wide_bytes);
   ExpectError(LoadVolume("raw:" + path + ":17x9x9:float32"), absl::StatusCode::kInvalidArgument,
               "wide.raw", "Inf sample at index (3, 8, 8)");
+  // A float64 sample past the float range is said to be one (the file has no Inf in it).
+  std::vector<unsigned char> doubles;
+  for (int i = 0; i < 27; ++i) Put(doubles, i == 5 ? 6.9e300 : 0.5, false);
+  const std::string huge = ScratchPath("huge64.raw");
+  WriteBytes(huge, doubles);
+  ExpectError(LoadVolume("raw:" + huge + ":3x3x3:float64"), absl::StatusCode::kInvalidArgument,
+              "huge64.raw",
+              "Inf sample at index (2, 1, 0) (or a float64 sample past the float "
+              "range, +-3.4e38, where samples are held)");
 
   NiftiFile nf;
   nf.dims = dims;
