@@ -546,7 +546,7 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
       {"--generator-mb 0", "generator_mb (--generator-mb) must be in 1..1073741824"},
       {"--max-dim 1026", "max_dim (--max-dim) must be in 2..1025"},
       // Counts take exponents (GuardedDaemon starts with --max-triangles 1e5), not fractions.
-      {"--max-triangles 2.5", "Could not convert: --max-triangles = 2.5"},
+      {"--max-triangles 2.5", "--max-triangles: 2.5 is not a whole number"},
       {"--token ''", "--token is empty"},
       {"--token \"$(printf 'a\\tb')\"", "token must be printable ASCII"},
       {"--bogus", "--bogus"}};
