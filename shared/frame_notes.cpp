@@ -1,5 +1,7 @@
 #include "shared/frame_notes.h"
 
+#include <cstring>
+
 #include "shared/number_list.h"
 
 namespace isostream {
@@ -9,6 +11,23 @@ std::string IsovalueOutsideNote(float iso, float min_value, float max_value,
   if (iso >= min_value && iso <= max_value) return "";
   return "isovalue " + ShortestText(iso) + " lies outside " + volume + "'s values [" +
          ShortestText(min_value) + ", " + ShortestText(max_value) + "]: no surface for it";
+}
+
+std::string CoarseValuesNote(float min_value, float max_value, const std::string& volume) {
+  // Floats in order as integers: the count of floats between two values.
+  const auto order = [](float f) {
+    int32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    return bits < 0 ? -int64_t(bits & 0x7fffffff) : int64_t(bits);
+  };
+  if (!(min_value < max_value)) return "";
+  const int64_t steps = order(max_value) - order(min_value);
+  if (steps >= kCoarseValueSteps) return "";
+  return volume + "'s values [" + ShortestText(min_value) + ", " + ShortestText(max_value) +
+         "] are " + std::to_string(steps) + " float step" + (steps == 1 ? "" : "s") +
+         " apart: far from 0, single precision keeps few values (surfaces step between them); "
+         "subtract an offset such as " +
+         ShortestText(min_value) + " before storing";
 }
 
 std::string FrameNote(int64_t triangles, int64_t budget, int64_t fitted, double eps_used,

@@ -15,11 +15,21 @@ namespace isostream {
 std::string IsovalueOutsideNote(float iso, float min_value, float max_value,
                                 const std::string& volume);
 
-// Prints "TOOL: note: ..." to stderr for each isovalue outside [min_value, max_value], and
-// returns whether some isovalue lies within (FrameNote's some_isovalue_inside).
+// "VOLUME's values [1e6, 1000000.0625] are 1 float step apart: ...", where the values span
+// fewer than kCoarseValueSteps floats: data far from 0 (float64 measurements with a large
+// offset, rounded to the single precision samples are held in) keep few distinct values, and
+// an isovalue between two of them has no surface of its own.
+inline constexpr int64_t kCoarseValueSteps = 4096;
+std::string CoarseValuesNote(float min_value, float max_value, const std::string& volume);
+
+// Prints "TOOL: note: ..." to stderr for each isovalue outside [min_value, max_value] (and
+// CoarseValuesNote's, if any), and returns whether some isovalue lies within (FrameNote's
+// some_isovalue_inside).
 template <typename Isovalues>
 bool NoteIsovaluesOutside(const char* tool, const Isovalues& isovalues, float min_value,
                           float max_value, const std::string& volume) {
+  const std::string coarse = CoarseValuesNote(min_value, max_value, volume);
+  if (!coarse.empty()) std::fprintf(stderr, "%s: note: %s\n", tool, coarse.c_str());
   bool some_inside = false;
   for (const float iso : isovalues) {
     const std::string note = IsovalueOutsideNote(iso, min_value, max_value, volume);

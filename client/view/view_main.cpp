@@ -247,6 +247,8 @@ int Run(const Args& args) {
                  args.volume.c_str(), ShortestText(min_value).c_str());
     iso.push_back(min_value);
   } else if (args.iso.empty()) {
+    const std::string coarse = CoarseValuesNote(info->min_value(), info->max_value(), args.volume);
+    if (!coarse.empty()) std::fprintf(stderr, "isostream-view: note: %s\n", coarse.c_str());
     // As the server holds them (float), distinct and above the lowest value (a crossing needs a
     // corner below the isovalue): a range of a few float steps (float64 data far from 0) rounded
     // them into one, "given twice". Fewer then, else the top value.

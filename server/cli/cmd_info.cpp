@@ -110,7 +110,11 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
               CacheOutcomeName(prepared->cache));
   if (!prepared->cache_note.empty())
     std::printf("cache         %s\n", prepared->cache_note.c_str());
-  if (iso.empty()) return 0;
+  if (iso.empty()) {
+    const std::string coarse = CoarseValuesNote(v.min_value, v.max_value, args.volume);
+    if (!coarse.empty()) std::fprintf(stderr, "isostream info: note: %s\n", coarse.c_str());
+    return 0;
+  }
   NoteIsovaluesOutside("isostream info", counting.isovalues, prepared->volume->min_value,
                        prepared->volume->max_value, args.volume);
   return PrintCountsByEps(*prepared, counting, iso);
