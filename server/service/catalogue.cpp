@@ -9,6 +9,7 @@
 
 #include "server/volume/generators.h"
 #include "server/volume/padding.h"
+#include "shared/frame_notes.h"
 #include "shared/malloc_tuning.h"
 
 namespace isostream::service {
@@ -301,6 +302,9 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
     const std::string& note = volume->prepared.cache_note;
     if (note.find("not stored") != std::string::npos)
       spdlog::warn("volume '{}': hierarchy cache: {}", name, note);
+    const std::string coarse = CoarseValuesNote(volume->prepared.volume->min_value,
+                                                volume->prepared.volume->max_value, name);
+    if (!coarse.empty()) spdlog::warn("volume {}", coarse);
     prepared_.fetch_add(1);
     ReturnFreedMemory();  // what preparing freed (the volume's grid above all) is not reused
     served = std::move(volume);
