@@ -279,15 +279,23 @@ TEST(Cli, SurprisingFramesAreExplained) {
   }
 }
 
+// `args` ended by one value of its last flag, then another: the second succeeds and prints
+// what the first did. Returns the second run.
+CliRun ExpectSameOutput(const std::string& args, const std::string& first,
+                        const std::string& second) {
+  const CliRun a = Cli(args + first);
+  const CliRun b = Cli(args + second);
+  EXPECT_EQ(b.code, 0) << b.output;
+  EXPECT_EQ(b.output, a.output) << first << " vs " << second;
+  return b;
+}
+
 // A count may be written with an exponent ("--budget 1e3"): it was refused as "Could not
 // convert". A fraction is still refused.
 TEST(Cli, BudgetsWithAnExponent) {
   const std::string args = "extract --volume sphere:17 --iso 0.5 --no-cache -o " +
                            TempPath("cli-exponent.ply") + " --budget ";
-  const CliRun plain = Cli(args + "1000");
-  const CliRun exponent = Cli(args + "1e3");
-  EXPECT_EQ(exponent.code, 0) << exponent.output;
-  EXPECT_EQ(exponent.output, plain.output);
+  ExpectSameOutput(args, "1000", "1e3");
   // Counts that are not whole or pass int64's end are refused by name (CLI11 said "Could not
   // convert", and took 99999999999999999999 as the largest count silently).
   for (const auto& [given, says] :
@@ -299,9 +307,7 @@ TEST(Cli, BudgetsWithAnExponent) {
     EXPECT_NE(bad.output.find(says), std::string::npos) << bad.output;
   }
   // Up to int64's end: 9e18 (below 2^63) was refused as "Could not convert".
-  const CliRun near_end = Cli(args + "9.2e18");
-  EXPECT_EQ(near_end.code, 0) << near_end.output;
-  EXPECT_EQ(near_end.output, Cli(args + "9200000000000000000").output);
+  ExpectSameOutput(args, "9200000000000000000", "9.2e18");
 }
 
 // More threads than cores: the same output, and nothing from TBB on stderr (it warned that it
@@ -309,10 +315,7 @@ TEST(Cli, BudgetsWithAnExponent) {
 TEST(Cli, ThreadsPastTheCoresAreQuiet) {
   const std::string args = "extract --volume sphere:17 --iso 0.5 --eps 0 --no-cache -o " +
                            TempPath("cli-threads.ply") + " --threads ";
-  const CliRun one = Cli(args + "1");
-  const CliRun many = Cli(args + "1024");
-  EXPECT_EQ(many.code, 0) << many.output;
-  EXPECT_EQ(many.output, one.output);
+  const CliRun many = ExpectSameOutput(args, "1", "1024");
   EXPECT_EQ(many.output.find("TBB"), std::string::npos) << many.output;
 }
 
