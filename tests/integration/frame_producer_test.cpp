@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <tbb/parallel_for.h>
 
+#include <atomic>
 #include <chrono>
 #include <mutex>
 #include <set>
@@ -14,6 +15,7 @@
 #include "client/net/session_client.h"
 #include "server/extract/extractor.h"
 #include "server/service/catalogue.h"
+#include "server/service/worker_pool.h"
 #include "shared/frame_codec.h"
 
 namespace isostream::service {
@@ -300,6 +302,60 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   const absl::Status too_big = bounded.Add(big);
   EXPECT_EQ(too_big.code(), absl::StatusCode::kDataLoss) << too_big;
   EXPECT_NE(too_big.message().find("at most 65536"), std::string::npos) << too_big;
+}
+
+// A refused first chunk of a new frame must leave an unfinished frame able to
+// continue with its next chunk (next_chunk_ restored too, not only the mesh).
+TEST(FrameAssembler, ARefusedNewFrameLeavesTheUnfinishedOneResumable) {
+  OrderedMesh mesh;
+  for (uint32_t t = 0; t < 3; ++t) {
+    for (int i = 0; i < 3; ++i) {
+      mesh.positions.insert(mesh.positions.end(), {float(t), float(i), 0.0f});
+      mesh.normals.insert(mesh.normals.end(), {0.0f, 0.0f, 1.0f});
+      mesh.triangles.push_back(3 * t + uint32_t(i));
+    }
+    mesh.surface.push_back(0);
+  }
+  auto chunk = [&](uint32_t index, bool last) {
+    ::isostream::v1::FrameChunk c;
+    EXPECT_TRUE(EncodeChunkRaw(mesh, index, 1, c.mutable_data()).ok());
+    c.set_frame_id(7);
+    c.set_chunk_index(index);
+    c.set_first_triangle(index);
+    c.set_triangle_count(1);
+    if (last) {
+      c.set_last(true);
+      c.set_chunk_count(index + 1);
+    }
+    return c;
+  };
+  net::FrameAssembler a;
+  ASSERT_TRUE(a.Add(chunk(0, false)).ok());
+  ASSERT_TRUE(a.Add(chunk(1, false)).ok());
+  auto bad = chunk(0, false);
+  bad.set_frame_id(8);
+  bad.set_first_triangle(5);  // refused
+  EXPECT_EQ(a.Add(bad).code(), absl::StatusCode::kDataLoss);
+  EXPECT_FALSE(a.complete());
+  EXPECT_EQ(a.frame().id, 7u);
+  const absl::Status resumed = a.Add(chunk(2, true));
+  EXPECT_TRUE(resumed.ok()) << resumed;
+  EXPECT_TRUE(a.complete());
+  EXPECT_EQ(a.frame().mesh.triangle_count(), 3u);
+}
+
+// As worker_pool.h promises: ~WorkerPool runs the jobs already queued, then joins.
+TEST(WorkerPool, DestructorRunsTheJobsAlreadyQueued) {
+  std::atomic<int> ran{0};
+  {
+    WorkerPool pool(1);
+    pool.Submit([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      ++ran;
+    });
+    for (int i = 0; i < 10; ++i) pool.Submit([&] { ++ran; });
+  }
+  EXPECT_EQ(ran.load(), 11);
 }
 
 }  // namespace

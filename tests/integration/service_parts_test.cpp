@@ -568,12 +568,30 @@ TEST_F(RetainedFrameTest, FreesOtherStreamsFramesLeastRecentlyUsedFirst) {
   EXPECT_EQ(huge.StartRecording(v, r), nullptr);
   EXPECT_NE(a.Find(v, r), nullptr);
   EXPECT_NE(c.Find(v, r), nullptr);
+  // When the frames that could be freed are not enough, none is freed: with a in
+  // use, a frame estimated at two of these cannot fit even without c, so c must stay.
+  {
+    std::lock_guard<std::mutex> using_a_only(a.mutex());
+    RetainedFrame d(&budget);
+    d.Drew(v, r, 2 * extract());
+    EXPECT_EQ(d.StartRecording(v, r), nullptr);
+    EXPECT_NE(c.Find(v, r), nullptr);
+  }
   // A frame whose stream is using it is not freed: with a and c in use, b finds no room.
   std::lock_guard<std::mutex> using_a(a.mutex());
   std::lock_guard<std::mutex> using_c(c.mutex());
   EXPECT_FALSE(retain(b));
   EXPECT_NE(a.Find(v, r), nullptr);
   EXPECT_NE(c.Find(v, r), nullptr);
+  // The same volume prepared again (another catalogue: another hierarchy, the
+  // first still alive) is another mesh: a's frame must not serve it.
+  {
+    VolumeCatalogue other{CatalogueOptions{}};
+    auto again = other.Get("buckyball:65");
+    ASSERT_TRUE(again.ok());
+    ASSERT_NE((*again)->prepared.hierarchy, v.prepared.hierarchy);
+    EXPECT_EQ(a.Find(**again, r), nullptr);
+  }
 }
 
 }  // namespace
