@@ -17,6 +17,8 @@ PACKAGES=(
   libglfw3-dev xvfb xauth xdotool
   # transport
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  # the daemon checks that a TLS key belongs to its certificate (gRPC links OpenSSL already)
+  libssl-dev
   # small well-kept libraries: CLI parsing, logging, JSON, PNG
   libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libpng-dev libxxhash-dev libabsl-dev
   # tests and benchmarks

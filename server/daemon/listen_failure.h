@@ -7,7 +7,7 @@
 namespace isostream::daemon {
 
 // "the port is in use", "the address is not this machine's", ...; "" when a bind by hand works
-// (then something else failed: TLS files that do not belong together, say).
+// (then something else failed: gRPC refused the TLS files, say).
 std::string ListenFailureReason(const std::string& address);
 
 }  // namespace isostream::daemon

@@ -11,6 +11,11 @@
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <grpcpp/security/server_credentials.h>
+#include <openssl/bio.h>
+#include <openssl/err.h>
+#include <openssl/evp.h>
+#include <openssl/pem.h>
+#include <openssl/x509.h>
 #include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -19,6 +24,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <memory>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -74,6 +81,28 @@ void GrpcLog(gpr_log_func_args* args) {
   spdlog::debug("grpc {}:{}: {}", args->file, args->line, args->message);
 }
 
+// Whether the PEM key is the private half of the PEM certificate's public key; nullopt where
+// either does not parse here (gRPC then decides). gRPC tells a pair that does not belong
+// together only as a failed listen, blaming the port, after the catalogue's preparation began.
+std::optional<bool> KeyBelongsToCertificate(const std::string& key, const std::string& cert) {
+  // No passphrase prompt on the terminal for an encrypted key (gRPC takes none either).
+  pem_password_cb* no_passphrase = [](char*, int, int, void*) { return 0; };
+  std::unique_ptr<BIO, decltype(&BIO_free)> key_in(BIO_new_mem_buf(key.data(), int(key.size())),
+                                                   &BIO_free);
+  std::unique_ptr<BIO, decltype(&BIO_free)> cert_in(BIO_new_mem_buf(cert.data(), int(cert.size())),
+                                                    &BIO_free);
+  if (!key_in || !cert_in) return std::nullopt;
+  std::unique_ptr<EVP_PKEY, decltype(&EVP_PKEY_free)> private_key(
+      PEM_read_bio_PrivateKey(key_in.get(), nullptr, no_passphrase, nullptr), &EVP_PKEY_free);
+  std::unique_ptr<X509, decltype(&X509_free)> certificate(
+      PEM_read_bio_X509(cert_in.get(), nullptr, no_passphrase, nullptr), &X509_free);
+  ERR_clear_error();  // what failed to parse is gRPC's to report
+  if (!private_key || !certificate) return std::nullopt;
+  const bool belongs = X509_check_private_key(certificate.get(), private_key.get()) == 1;
+  ERR_clear_error();
+  return belongs;
+}
+
 int Run(const DaemonConfig& config) {
   std::shared_ptr<grpc::ServerCredentials> creds;
   if (!config.tls_cert.empty()) {
@@ -91,6 +120,11 @@ int Run(const DaemonConfig& config) {
     }
     if (pair.private_key.find("PRIVATE KEY-----") == std::string::npos) {
       spdlog::critical("TLS key '{}' holds no PEM private key", config.tls_key);
+      return 2;
+    }
+    if (KeyBelongsToCertificate(pair.private_key, pair.cert_chain) == false) {
+      spdlog::critical("TLS key '{}' does not belong to certificate '{}'", config.tls_key,
+                       config.tls_cert);
       return 2;
     }
     grpc::SslServerCredentialsOptions options;
@@ -129,7 +163,7 @@ int Run(const DaemonConfig& config) {
       spdlog::critical(
           "cannot listen on {}: the port is in use, or the address is not this machine's{}",
           config.listen,
-          config.tls_cert.empty() ? "" : ", or the TLS certificate and key do not belong together");
+          config.tls_cert.empty() ? "" : ", or gRPC refused the TLS certificate or key");
     }
     return 1;
   }
