@@ -52,6 +52,15 @@ struct ProducerRig {
   ServedVolumePtr volume;  // null if it could not be prepared
 };
 
+// A view of buckyball:65 at isovalues `isos` and `eps`; callers place the eye.
+::isostream::v1::ViewRequest BuckyballView(const std::vector<float>& isos, double eps) {
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("buckyball:65");
+  for (float iso : isos) view.add_surfaces()->set_isovalue(iso);
+  view.set_eps(eps);
+  return view;
+}
+
 // Produces one frame of buckyball:65 (isovalues `isos`, `eps`, the eye at x = 3) in chunks of
 // `chunk` triangles, at most `queued` held, with a deadline of `deadline_ms` and `encoders`
 // encoding threads, into `sink`, which never drains.
@@ -65,10 +74,7 @@ absl::Status ProduceIntoStuckSink(int chunk, int queued, int deadline_ms,
   settings.deadline_ms = deadline_ms;
   ProducerRig rig(settings, encoders);
   if (!rig.volume) return absl::InternalError("buckyball:65 could not be prepared");
-  ::isostream::v1::ViewRequest view;
-  view.set_volume("buckyball:65");
-  for (float iso : isos) view.add_surfaces()->set_isovalue(iso);
-  view.set_eps(eps);
+  ::isostream::v1::ViewRequest view = BuckyballView(isos, eps);
   view.mutable_camera()->mutable_eye()->set_x(3);
   auto request = ToExtractRequest(view, Limits{}, 0);
   if (!request.ok()) return request.status();
@@ -115,10 +121,7 @@ TEST(FrameProducer, TheRefinedFrameIsNotChargedForTheCoarseFramesDelivery) {
   settings.deadline_ms = 500;
   ProducerRig rig(settings, 2);
   ASSERT_TRUE(rig.volume);
-  ::isostream::v1::ViewRequest view;
-  view.set_volume("buckyball:65");
-  for (float iso : {0.05f, 0.15f, 0.25f}) view.add_surfaces()->set_isovalue(iso);
-  view.set_eps(0.002);
+  ::isostream::v1::ViewRequest view = BuckyballView({0.05f, 0.15f, 0.25f}, 0.002);
   view.set_progressive(true);
   view.set_codec(::isostream::v1::RAW);
   view.mutable_camera()->mutable_eye()->set_x(3);
@@ -180,10 +183,7 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   settings.max_queued_chunks = 1000;
   ProducerRig rig(settings, 2);
   ASSERT_TRUE(rig.volume);
-  ::isostream::v1::ViewRequest view;
-  view.set_volume("buckyball:65");
-  view.add_surfaces()->set_isovalue(0.1f);
-  view.set_eps(0.002);
+  ::isostream::v1::ViewRequest view = BuckyballView({0.1f}, 0.002);
   view.mutable_camera()->mutable_eye()->set_y(-3);
   auto request = ToExtractRequest(view, Limits{}, 0);
   ASSERT_TRUE(request.ok());
