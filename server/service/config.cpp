@@ -151,13 +151,7 @@ std::string JsonError(const std::string& path, const std::string& text) {
   return "'" + path + "' is not valid JSON" + (why.empty() ? "" : ": " + why);
 }
 
-}  // namespace
-
-int FirstChunkTriangles(const DaemonConfig& c) {
-  return c.first_chunk_triangles.value_or(std::min(kDefaultFirstChunkTriangles, c.chunk_triangles));
-}
-
-absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
+absl::Status ReadConfigFile(const std::string& path, DaemonConfig* config) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec))
     return absl::InvalidArgumentError("config file '" + path + "' is a directory");
@@ -179,16 +173,27 @@ absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
     return true;
   };
   const json j = json::parse(text.str(), note_keys, /*allow_exceptions=*/false);
-  // Messages quote the file (keys, values, the bytes a parse stopped at): printed escaped.
-  if (j.is_discarded())
-    return absl::InvalidArgumentError(PrintableText(JsonError(path, text.str())));
+  if (j.is_discarded()) return absl::InvalidArgumentError(JsonError(path, text.str()));
   if (!repeated.empty())
-    return absl::InvalidArgumentError(
-        PrintableText(path + ": key '" + repeated + "' is given twice"));
+    return absl::InvalidArgumentError(path + ": key '" + repeated + "' is given twice");
   const absl::Status s = Parse(j, config);
-  if (!s.ok())
-    return absl::InvalidArgumentError(PrintableText(path + ": " + std::string(s.message())));
+  if (!s.ok()) return absl::InvalidArgumentError(path + ": " + std::string(s.message()));
   return absl::OkStatus();
+}
+
+}  // namespace
+
+int FirstChunkTriangles(const DaemonConfig& c) {
+  return c.first_chunk_triangles.value_or(std::min(kDefaultFirstChunkTriangles, c.chunk_triangles));
+}
+
+absl::Status LoadConfigFile(const std::string& path, DaemonConfig* config) {
+  const absl::Status read = ReadConfigFile(path, config);
+  if (read.ok()) return read;
+  // Messages quote the file (keys, values, the bytes a parse stopped at): printed escaped, as
+  // a volume's load errors are.
+  const absl::string_view message = read.message();
+  return absl::Status(read.code(), PrintableText(std::string_view(message.data(), message.size())));
 }
 
 absl::Status ValidateConfig(const DaemonConfig& c) {
