@@ -461,10 +461,10 @@ TEST(View, DefaultIsovaluesForExtremeAndConstantVolumes) {
     return name + "=raw:" + path + ":3x3x3:float32";
   };
   testing::DaemonProcess daemon;
-  ASSERT_TRUE(daemon.Start({"--no-cache", "--volume", raw("extreme", -3e38f, 3e38f), "--volume",
-                            raw("constant", 0.5f, 0.5f), "--volume",
-                            raw("narrow", 1e6f, 1e6f + 0.25f)},
-                           dir.path() + "/isostreamd.log"));
+  ASSERT_TRUE(
+      daemon.Start({"--no-cache", "--volume", raw("extreme", -3e38f, 3e38f), "--volume",
+                    raw("constant", 0.5f, 0.5f), "--volume", raw("narrow", 1e6f, 1e6f + 0.25f)},
+                   dir.path() + "/isostreamd.log"));
   for (const std::string name : {"extreme", "constant", "narrow"}) {
     SCOPED_TRACE(name);
     const std::string png = dir.path() + "/" + name + ".png";
@@ -479,8 +479,17 @@ TEST(View, DefaultIsovaluesForExtremeAndConstantVolumes) {
     } else {
       EXPECT_EQ(r.output.find(": 0 triangles"), std::string::npos) << r.output;
     }
+    // Values a few float steps apart are said, by the viewer and in the daemon's log.
+    const bool narrow = name == "narrow";
+    EXPECT_EQ(r.output.find("are 4 float steps apart") != std::string::npos, narrow) << r.output;
   }
   EXPECT_EQ(daemon.Stop(), 0);
+  std::ifstream log(dir.path() + "/isostreamd.log");
+  const std::string logged((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  EXPECT_NE(logged.find("volume narrow's values [1e+06, 1000000.25] are 4 float steps apart"),
+            std::string::npos)
+      << logged;
+  EXPECT_EQ(logged.find("volume extreme's values"), std::string::npos) << logged;
 }
 
 // Once every frame asked for is written, how the stream ends does not matter: a daemon stopping
