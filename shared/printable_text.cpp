@@ -1,5 +1,6 @@
 #include "shared/printable_text.h"
 
+#include <algorithm>
 #include <cstdint>
 
 namespace isostream {
