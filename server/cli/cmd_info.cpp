@@ -98,15 +98,21 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
               ShortestText(v.max_value).c_str());
   std::printf("hierarchy     cube %d^3 (k = %d), %d bisection levels, %zu refinement vertices\n", n,
               h.k(), 3 * h.k(), h.point_count() - 8);
+  if (h.stored_point_count() < h.point_count())
+    std::printf(
+        "stored        %d x %d x %d planes of the cube's (the rest stand-ins: %.1f%% of "
+        "its points)\n",
+        h.stored_dims()[0], h.stored_dims()[1], h.stored_dims()[2],
+        100.0 * double(h.stored_point_count()) / double(h.point_count()));
   std::printf("eta (root)    %g  (error bound of the 6 initial tetrahedra, data units)\n",
               h.eta(n / 2, n / 2, n / 2));
   std::printf("memory        eta %.1f MiB (%.2f B/point), samples+eta store %.1f MiB\n",
-              h.eta_bytes() / 1048576.0, double(h.eta_bytes()) / double(h.point_count()),
+              h.eta_bytes() / 1048576.0, double(h.eta_bytes()) / double(h.stored_point_count()),
               h.total_bytes() / 1048576.0);
   std::printf("load          %.3f s\n", prepared->load_s);
   std::printf("pad           %.3f s\n", prepared->pad_s);
   std::printf("hierarchy     %.3f s  (%d threads, %.0f M points/s; cache %s)\n",
-              prepared->hierarchy_s, threads, h.point_count() / prepared->hierarchy_s / 1e6,
+              prepared->hierarchy_s, threads, h.stored_point_count() / prepared->hierarchy_s / 1e6,
               CacheOutcomeName(prepared->cache));
   if (!prepared->cache_note.empty())
     std::printf("cache         %s\n", prepared->cache_note.c_str());

@@ -56,10 +56,15 @@
 #include <new>
 #include <string>
 
+#include "server/hierarchy/eta_rounding.h"
 #include "server/hierarchy/refinement_vertex.h"
+#include "server/hierarchy/stand_in_build.h"
 
 namespace isostream {
 namespace {
+
+using hierarchy_internal::DiamondEta;
+using hierarchy_internal::IsFinite;
 
 // The bricks are first touched by the parallel scale-0 pass; asking for transparent huge
 // pages cuts the page faults of a 513^3 build from ~330 k to ~650. Only a hint: ignored where
@@ -72,33 +77,10 @@ void AdviseHugePages(void* data, size_t bytes) {
   if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
 }
 
-// The smallest float >= v (v >= 0). For f >= +0 the next float up is the next bit pattern
-// (std::nextafter(f, INFINITY), without the library call).
-inline float RoundUp(double v) {
-  // Past the float range (wavelets of samples near FLT_MAX) the bound is +inf: such diamonds
-  // always refine, which is conservative. (Converting the double itself would be undefined.)
-  if (v > double(std::numeric_limits<float>::max())) return std::numeric_limits<float>::infinity();
-  float f = static_cast<float>(v);
-  if (static_cast<double>(f) < v) {
-    uint32_t bits;
-    std::memcpy(&bits, &f, sizeof(bits));
-    ++bits;
-    std::memcpy(&f, &bits, sizeof(f));
-  }
-  return f;
-}
-
 // eta of the diamond at tile point p with refinement edge (p - d, p + d), given the largest
 // eta of its children (0 if it has none).
 inline float Eta(const float* t, int p, int d, float worst) {
-  const double w = static_cast<double>(t[p]) - 0.5 * (static_cast<double>(t[p + d]) + t[p - d]);
-  return RoundUp(std::fabs(w) + worst);
-}
-
-inline bool IsFinite(float v) {
-  uint32_t bits;
-  std::memcpy(&bits, &v, sizeof(bits));
-  return (bits & 0x7f800000u) != 0x7f800000u;
+  return DiamondEta(t[p], t[p + d], t[p - d], worst);
 }
 
 }  // namespace
@@ -418,36 +400,70 @@ UninitializedVector<uint16_t> Hierarchy::LinearEtaCodes() const {
   return out;
 }
 
+UninitializedVector<uint16_t> Hierarchy::StoredEtaCodes() const {
+  UninitializedVector<uint16_t> out(stored_point_count());
+  const int sx = stored_[0], sy = stored_[1];
+  tbb::parallel_for(tbb::blocked_range<int>(0, stored_[2]), [&](const tbb::blocked_range<int>& r) {
+    for (int l = r.begin(); l != r.end(); ++l)
+      for (int j = 0; j < sy; ++j) {
+        uint16_t* row = &out[(size_t(l) * sy + j) * sx];
+        for (int i = 0; i < sx; ++i) row[i] = bricks_[BrickOf(i, j, l)].eta[PlaceInBrick(i, j, l)];
+      }
+  });
+  return out;
+}
+
 namespace {
 
-absl::Status OutOfMemory(int n) {
-  const size_t nb = (size_t(n) + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
-  const double gib = double(nb * nb * nb * sizeof(HierarchyBrick)) / double(1 << 30);
+absl::Status OutOfMemory(const PaddedSamples& samples) {
+  double bricks = 1;
+  for (int a = 0; a < 3; ++a)
+    bricks *= double((size_t(samples.stored(a)) + HierarchyBrick::kMask) >> HierarchyBrick::kLog2);
+  const double gib = bricks * sizeof(HierarchyBrick) / double(1 << 30);
   char size[32];
   std::snprintf(size, sizeof(size), "%.1f GiB", gib);
-  return absl::ResourceExhaustedError("hierarchy: out of memory for the " + std::to_string(n) +
-                                      "^3 cube's store (" + size + ")");
+  return absl::ResourceExhaustedError("hierarchy: out of memory for the " +
+                                      std::to_string(samples.n) + "^3 cube's store (" + size + ")");
+}
+
+bool ValidPlanes(const PaddedSamples& s) {
+  if (s.whole_cube()) return true;
+  for (int a = 0; a < 3; ++a) {
+    const std::vector<int>& planes = s.planes[a];
+    const std::vector<int>& of = s.plane_of[a];
+    if (planes.empty() || of.size() != size_t(s.n)) return false;
+    for (size_t i = 0; i < planes.size(); ++i)
+      if (planes[i] < 0 || planes[i] >= s.n || (i > 0 && planes[i] <= planes[i - 1])) return false;
+    for (const int p : of)
+      if (p < 0 || size_t(p) >= planes.size()) return false;
+  }
+  return true;
 }
 
 }  // namespace
 
 absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
-  const size_t n = static_cast<size_t>(samples.n);
   if (samples.k < 1 || samples.k > 12 || samples.n != (1 << samples.k) + 1 ||
-      samples.values.size() != n * n * n)
+      !ValidPlanes(samples) || samples.values.size() != samples.stored_points())
     return absl::InvalidArgumentError("hierarchy: samples are not a (2^k+1)^3 cube");
   k_ = samples.k;
   n_ = samples.n;
   data_dims_ = samples.data_dims;
-  const size_t nb = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;  // bricks per axis
   constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
   for (int a = 0; a < 3; ++a) {
-    const size_t brick_stride = a == 0 ? 1 : a == 1 ? nb : nb * nb;
-    axis_offset_[a].resize(n);
-    value_bytes_[a].resize(n);
-    eta_bytes_[a].resize(n);
-    for (size_t c = 0; c < n; ++c) {
-      const size_t brick = (c >> b) * brick_stride, inside = HierarchyBrick::Local(a, c & m);
+    stored_[a] = samples.stored(a);
+    bricks_per_axis_[a] = (size_t(stored_[a]) + m) >> b;
+  }
+  for (int a = 0; a < 3; ++a) {
+    const size_t brick_stride = a == 0   ? 1
+                                : a == 1 ? bricks_per_axis_[0]
+                                         : bricks_per_axis_[0] * bricks_per_axis_[1];
+    axis_offset_[a].resize(size_t(n_));
+    value_bytes_[a].resize(size_t(n_));
+    eta_bytes_[a].resize(size_t(n_));
+    for (int c = 0; c < n_; ++c) {
+      const int s = samples.stand_in(a, c);
+      const size_t brick = size_t(s >> b) * brick_stride, inside = HierarchyBrick::Local(a, s & m);
       axis_offset_[a][c] = (brick << (3 * b)) | inside;
       value_bytes_[a][c] = brick * sizeof(HierarchyBrick) + inside * sizeof(float);
       eta_bytes_[a][c] = brick * sizeof(HierarchyBrick) + inside * sizeof(uint16_t) +
@@ -456,7 +472,7 @@ absl::Status Hierarchy::SetUpStore(const PaddedSamples& samples) {
   }
   // not initialised: the builder or the assembly writes all. Failing, it throws bad_alloc,
   // which BuildHierarchy and AssembleHierarchy turn into a status.
-  bricks_.resize(nb * nb * nb);
+  bricks_.resize(bricks_per_axis_[0] * bricks_per_axis_[1] * bricks_per_axis_[2]);
   AdviseHugePages(bricks_.data(), bricks_.size() * sizeof(HierarchyBrick));
   return absl::OkStatus();
 }
@@ -467,34 +483,36 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(const PaddedSamples& samples,
                                                const EtaCodeSlabs& read_eta_codes) try {
   auto h = std::make_shared<Hierarchy>();
   ISOSTREAM_RETURN_IF_ERROR(h->SetUpStore(samples));
-  // Fill one layer of bricks (8 planes) at a time, brick by brick (each written once, whole,
-  // by one thread, which also first-touches its pages). Points of partial bricks beyond the
-  // cube are never read; they get zeros so the store is deterministic.
-  const size_t n = static_cast<size_t>(samples.n);
-  const size_t nb = (n + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
+  // Fill one layer of bricks (8 stored planes) at a time, brick by brick (each written once,
+  // whole, by one thread, which also first-touches its pages). Points of partial bricks beyond
+  // the stored planes are never read; they get zeros so the store is deterministic.
   constexpr int b = HierarchyBrick::kLog2, m = HierarchyBrick::kMask;
+  const int sx = samples.stored(0), sy = samples.stored(1), sz = samples.stored(2);
+  const size_t nbx = h->bricks_per_axis_[0], nby = h->bricks_per_axis_[1];
+  const size_t nbz = h->bricks_per_axis_[2];
+  const size_t plane = size_t(sx) * sy;
   HierarchyBrick* bricks = h->bricks_.data();
-  const int cube = samples.n;
-  UninitializedVector<uint16_t> slab(size_t(m + 1) * n * n);
-  for (size_t bz = 0; bz < nb; ++bz) {
-    const int z_begin = int(bz << b), z_end = std::min(cube, z_begin + m + 1);
+  UninitializedVector<uint16_t> slab(size_t(m + 1) * plane);
+  for (size_t bz = 0; bz < nbz; ++bz) {
+    const int z_begin = int(bz << b), z_end = std::min(sz, z_begin + m + 1);
     if (!read_eta_codes(z_begin, z_end, slab.data()))
-      return absl::DataLossError("hierarchy: the eta codes of planes " + std::to_string(z_begin) +
-                                 ".." + std::to_string(z_end - 1) + " could not be read");
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, nb), [&](const tbb::blocked_range<size_t>& r) {
+      return absl::DataLossError("hierarchy: the eta codes of stored planes " +
+                                 std::to_string(z_begin) + ".." + std::to_string(z_end - 1) +
+                                 " could not be read");
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nby), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t by = r.begin(); by != r.end(); ++by) {
-        for (size_t bx = 0; bx < nb; ++bx) {
-          HierarchyBrick& brick = bricks[(bz * nb + by) * nb + bx];
+        for (size_t bx = 0; bx < nbx; ++bx) {
+          HierarchyBrick& brick = bricks[(bz * nby + by) * nbx + bx];
           for (int lz = 0; lz <= m; ++lz)
             for (int ly = 0; ly <= m; ++ly) {
               const int z = z_begin + lz, y = int(by << b) + ly, x0 = int(bx << b);
               const int local = HierarchyBrick::Local(2, lz) + HierarchyBrick::Local(1, ly);
-              const int inside = z < cube && y < cube ? std::max(0, std::min(m + 1, cube - x0)) : 0;
-              const size_t row = (size_t(z) * n + y) * n + x0;
-              const size_t slab_row = (size_t(lz) * n + y) * n + x0;
+              const int inside = z < sz && y < sy ? std::max(0, std::min(m + 1, sx - x0)) : 0;
+              const size_t row = (size_t(z) * sy + y) * sx + x0;
+              const size_t slab_row = (size_t(lz) * sy + y) * sx + x0;
               if (inside == m + 1) {
-                // A whole row (all but the cube's last): unrolled, the x placements are
-                // constants (~1 G instructions less at 513^3 than computing each).
+                // A whole row (all but the last): unrolled, the x placements are constants (~1 G
+                // instructions less at 513^3 than computing each).
 #pragma GCC unroll 8
                 for (int lx = 0; lx <= m; ++lx) {
                   brick.value[local + HierarchyBrick::Local(0, lx)] = samples.values[row + lx];
@@ -517,7 +535,7 @@ absl::StatusOr<HierarchyPtr> AssembleHierarchy(const PaddedSamples& samples,
   }
   return HierarchyPtr(std::move(h));
 } catch (const std::bad_alloc&) {
-  return OutOfMemory(samples.n);
+  return OutOfMemory(samples);
 }
 
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
@@ -528,15 +546,19 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
   tbb::task_arena arena(options.threads > 0
                             ? std::min(options.threads, tbb::info::default_concurrency())
                             : int(tbb::task_arena::automatic));
-  HierarchyBuilder builder(samples.k, samples.values.data(), h.get());
   bool finite = true;
-  arena.execute([&] { finite = builder.Run(options); });
+  if (samples.whole_cube()) {
+    HierarchyBuilder builder(samples.k, samples.values.data(), h.get());
+    arena.execute([&] { finite = builder.Run(options); });
+  } else {
+    arena.execute([&] { finite = BuildWithStandIns(&samples, h.get(), options); });
+  }
   // Before the finite check: a stopped build left tiles unwritten, not samples wrong.
   if (options.stop && options.stop->load()) return absl::CancelledError("hierarchy build stopped");
   if (!finite) return absl::InvalidArgumentError("hierarchy: non-finite sample");
   return HierarchyPtr(std::move(h));
 } catch (const std::bad_alloc&) {
-  return OutOfMemory(samples.n);
+  return OutOfMemory(samples);
 }
 
 }  // namespace isostream

@@ -74,9 +74,9 @@ struct HierarchyBrick {
 
 struct HierarchyBuildOptions;
 
-// Where AssembleHierarchy gets the eta codes of a previous build: writes those of the points
-// with z in [z_begin, z_end) to `codes`, linear (x fastest, n^2 per plane), and returns true;
-// false if they cannot be had (a truncated file).
+// Where AssembleHierarchy gets the eta codes of a previous build: writes those of the stored
+// points on stored z planes [z_begin, z_end) to `codes`, linear (x fastest over the stored
+// planes), and returns true; false if they cannot be had (a truncated file).
 using EtaCodeSlabs = std::function<bool(int z_begin, int z_end, uint16_t* codes)>;
 
 class Hierarchy {
@@ -84,11 +84,16 @@ class Hierarchy {
   int k() const { return k_; }
   int n() const { return n_; }  // points per axis, 2^k + 1
   const std::array<int, 3>& data_dims() const { return data_dims_; }
-  size_t point_count() const { return size_t(n_) * n_ * n_; }
+  size_t point_count() const { return size_t(n_) * n_ * n_; }  // the cube's
+  // Planes stored per axis: n, or fewer where stand-ins hold the planes deep in the padding
+  // (stored_planes.h); every cube point reads as its stand-in's sample and eta.
+  const std::array<int, 3>& stored_dims() const { return stored_; }
+  size_t stored_point_count() const { return size_t(stored_[0]) * stored_[1] * stored_[2]; }
 
   // Point index: brick number * 512 + position inside the brick. The brick layout separates
   // per axis, so it is a sum of three per-axis offsets, tabulated (three small-table loads
-  // beat the shifts and multiplies on the traversal's hot path).
+  // beat the shifts and multiplies on the traversal's hot path); a coordinate whose plane is not
+  // stored maps to its stand-in's.
   size_t index(int x, int y, int z) const {
     return size_t(axis_offset_[0][x]) + axis_offset_[1][y] + axis_offset_[2][z];
   }
@@ -106,18 +111,23 @@ class Hierarchy {
   float sample(int x, int y, int z) const { return sample_at(index(x, y, z)); }
   float eta(int x, int y, int z) const { return eta_at(index(x, y, z)); }
 
-  // Linear (x fastest) copies, for tests and tools; LinearEtaCodes: the stored bfloat16
-  // codes (what the on-disk cache keeps).
+  // Linear (x fastest) copies of the whole cube, for tests and tools; LinearEtaCodes: the
+  // stored bfloat16 codes.
   std::vector<float> LinearSamples() const;
   std::vector<float> LinearEta() const;
   UninitializedVector<uint16_t> LinearEtaCodes() const;
+  // The codes of the stored points, linear over the stored planes (x fastest): what the
+  // on-disk cache keeps. The same as LinearEtaCodes where every plane is stored.
+  UninitializedVector<uint16_t> StoredEtaCodes() const;
 
-  // Memory: eta's share and the whole store (bricks pad n up to a multiple of 8).
+  // Memory: eta's share and the whole store (bricks pad the stored planes up to a multiple of 8
+  // per axis).
   size_t eta_bytes() const { return bricks_.size() * sizeof(HierarchyBrick::eta); }
   size_t total_bytes() const { return bricks_.size() * sizeof(HierarchyBrick); }
 
  private:
   friend class HierarchyBuilder;
+  friend class StandInBuilder;
   friend absl::StatusOr<std::shared_ptr<const Hierarchy>> BuildHierarchy(
       PaddedSamples samples, const HierarchyBuildOptions& options);
   friend absl::StatusOr<std::shared_ptr<const Hierarchy>> AssembleHierarchy(
@@ -125,12 +135,25 @@ class Hierarchy {
   // Checks the cube's shape, sets the sizes and offset tables, allocates (does not fill) the
   // bricks.
   absl::Status SetUpStore(const PaddedSamples& samples);
+  // The brick holding stored point (i, j, l) (stored plane indices), and its place there.
+  size_t BrickOf(int i, int j, int l) const {
+    constexpr int b = HierarchyBrick::kLog2;
+    return (size_t(l >> b) * bricks_per_axis_[1] + size_t(j >> b)) * bricks_per_axis_[0] +
+           size_t(i >> b);
+  }
+  static int PlaceInBrick(int i, int j, int l) {
+    constexpr int m = HierarchyBrick::kMask;
+    return HierarchyBrick::Local(0, i & m) + HierarchyBrick::Local(1, j & m) +
+           HierarchyBrick::Local(2, l & m);
+  }
   template <typename F>
   void ForEachRow(F&& f) const;
 
   int k_ = 0;
   int n_ = 0;
   std::array<int, 3> data_dims_{0, 0, 0};
+  std::array<int, 3> stored_{0, 0, 0};
+  std::array<size_t, 3> bricks_per_axis_{0, 0, 0};
   UninitializedVector<HierarchyBrick> bricks_;
   // 64-bit: at k = 11 and 12 the cube has 8.7e9 and 6.9e10 point slots.
   std::array<std::vector<uint64_t>, 3> axis_offset_;
@@ -155,9 +178,10 @@ struct HierarchyBuildOptions {
 absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options = {});
 
-// Builds the hierarchy's store from linear samples and the linear bfloat16 eta codes of a
-// previous build (Hierarchy::LinearEtaCodes, as kept by the on-disk cache), asked for 8 planes
-// at a time: the whole cube's codes are never held beside the samples and the store (at
+// Builds the hierarchy's store from the samples and the bfloat16 eta codes of a previous build
+// of the same stored planes (Hierarchy::StoredEtaCodes, as kept by the on-disk cache; linear
+// over the stored planes, a plane being stored(0) x stored(1) codes), asked for 8 planes at a
+// time: the whole cube's codes are never held beside the samples and the store (at
 // 1025^3 they were 2.15 GB more than a build's peak). DATA_LOSS if `read_eta_codes` fails.
 absl::StatusOr<HierarchyPtr> AssembleHierarchy(const PaddedSamples& samples,
                                                const EtaCodeSlabs& read_eta_codes);

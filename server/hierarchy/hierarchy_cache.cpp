@@ -118,7 +118,7 @@ bool OpenCache(const std::string& path, const PaddedSamples& s, uint64_t samples
     *why = "cache header truncated";
     return false;
   }
-  const uint64_t count = static_cast<uint64_t>(s.n) * s.n * s.n;
+  const uint64_t count = s.stored_points();
   if (std::memcmp(h.magic, kMagic, sizeof(kMagic)) != 0) {
     *why = "cache file has wrong magic";
     return false;
@@ -147,7 +147,7 @@ absl::StatusOr<HierarchyPtr> ReadCache(std::ifstream* in, const PaddedSamples& s
                                                                 &XXH3_freeState);
   if (!hash) return absl::ResourceExhaustedError("hierarchy cache: out of memory");
   XXH3_64bits_reset(hash.get());
-  const size_t plane = static_cast<size_t>(s.n) * s.n;
+  const size_t plane = static_cast<size_t>(s.stored(0)) * s.stored(1);
   bool stopped = false;
   auto h = AssembleHierarchy(s, [&](int z_begin, int z_end, uint16_t* codes) {
     if (stop != nullptr && stop->load()) {
@@ -206,7 +206,7 @@ bool WriteCache(const std::string& path, const Hierarchy& hier, uint64_t samples
   // 1025^3): without room for it the hierarchy is served, only not stored.
   UninitializedVector<uint16_t> eta;
   try {
-    eta = hier.LinearEtaCodes();
+    eta = hier.StoredEtaCodes();
   } catch (const std::bad_alloc&) {
     std::fclose(out);
     return fail("out of memory for the cache file's copy of the eta codes");

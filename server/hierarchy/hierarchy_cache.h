@@ -1,8 +1,9 @@
 // On-disk cache of built hierarchies, so a restart does not rebuild.
 //
 // A cache file holds eta for one set of padded samples as the hierarchy stores it: bfloat16
-// codes, linear (x fastest), 2 bytes per point (format version 2; version 1 held float eta,
-// 4 bytes per point). It is keyed by a hash of the samples (so any change to the source, the
+// codes, linear (x fastest) over the planes it stores (the whole cube, or stand-ins for the
+// planes deep in the padding: stored_planes.h), 2 bytes per point (format version 2; version 1
+// held float eta, 4 bytes per point). It is keyed by a hash of the samples (so any change to the source, the
 // padding or the generator makes the entry stale) and carries a format version and a checksum
 // of the payload. A file that is stale, truncated, from another version or fails its checksum
 // is ignored and replaced by a fresh build; writes go to a temporary file renamed into place,

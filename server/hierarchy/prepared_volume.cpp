@@ -6,6 +6,7 @@
 
 #include "server/volume/load.h"
 #include "server/volume/padding.h"
+#include "server/volume/stored_planes.h"
 #include "shared/malloc_tuning.h"
 
 namespace isostream {
@@ -28,14 +29,18 @@ absl::StatusOr<PreparedVolume> PrepareSteps(const std::string& spec, const Volum
   ISOSTREAM_ASSIGN_OR_RETURN(p.volume, LoadVolume(spec, limits, build.stop));
   p.load_s = Seconds(t0);
   ISOSTREAM_RETURN_IF_ERROR(StopRequested(build));
-  // The loader counted the data's samples; the cube it pads to has its longest side's cubed
-  // (a 1025x2x2 file of 4 KB would take ~13 GB), and that is what max_voxels must bound.
-  const int64_t side = (int64_t{1} << HierarchyLevelFor(p.volume->dims)) + 1;
-  if (side * side * side > limits.max_voxels)
+  // The loader counted the data's samples; the hierarchy holds the points of the cube's planes it
+  // stores (stored_planes.h: with stand-ins, a 1025x2x2 file of 4 KB holds 1025x~70x~70 points,
+  // where the whole cube would take ~13 GB), and that is what max_voxels must bound.
+  const int k = HierarchyLevelFor(p.volume->dims);
+  const int64_t side = (int64_t{1} << k) + 1;
+  const int64_t points = StoredPointCount(k, p.volume->dims);
+  if (points > limits.max_voxels)
     return absl::ResourceExhaustedError(
-        spec + ": is held as a " + std::to_string(side) + "^3 cube (its longest side, cubed), " +
-        std::to_string(side * side * side) + " points, past the limit of " +
-        std::to_string(limits.max_voxels));
+        spec + ": is held as " + std::to_string(points) + " points of a " + std::to_string(side) +
+        "^3 cube (its longest side, cubed" +
+        (points < side * side * side ? ", less the planes deep in its padding" : "") +
+        "), past the limit of " + std::to_string(limits.max_voxels));
   t0 = std::chrono::steady_clock::now();
   ISOSTREAM_ASSIGN_OR_RETURN(PaddedSamples padded, PadToHierarchyDomain(*p.volume, build.stop));
   p.pad_s = Seconds(t0);

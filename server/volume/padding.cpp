@@ -11,6 +11,7 @@
 #include <string>
 
 #include "server/volume/grid_blocks.h"
+#include "server/volume/stored_planes.h"
 
 namespace isostream {
 namespace {
@@ -21,21 +22,26 @@ constexpr int kMaxHierarchyLevel = 12;
 // Leaf buffers are z fastest: consecutive x are a plane of the leaf apart.
 constexpr int kLeafXStride = FloatLeaf::DIM * FloatLeaf::DIM;
 
-// The cube is the one allocation padding makes, and the one that can be huge (a 2049-sample
-// axis makes it 2049^3 floats, 32 GiB): its failure says how much was asked for.
-absl::Status OutOfMemory(const std::string& where, int n) {
-  const double bytes = double(n) * n * n * sizeof(float);
+// The stored planes are the one allocation padding makes, and the one that can be huge (a
+// 2049-sample axis makes the whole cube 2049^3 floats, 32 GiB): its failure says how much was
+// asked for.
+absl::Status OutOfMemory(const std::string& where, const PaddedSamples& out) {
+  const double bytes = double(out.stored_points()) * sizeof(float);
   char size[32];
   if (bytes >= double(1 << 30))
     std::snprintf(size, sizeof(size), "%.1f GiB", bytes / double(1 << 30));
   else
     std::snprintf(size, sizeof(size), "%.0f MiB", bytes / double(1 << 20));
-  return absl::ResourceExhaustedError(where + ": out of memory for the " + std::to_string(n) +
-                                      "^3 cube (" + size + ")");
+  const std::string what = out.whole_cube() ? "the " + std::to_string(out.n) + "^3 cube"
+                                            : "the " + std::to_string(out.n) + "^3 cube's " +
+                                                  std::to_string(out.stored(0)) + "x" +
+                                                  std::to_string(out.stored(1)) + "x" +
+                                                  std::to_string(out.stored(2)) + " stored planes";
+  return absl::ResourceExhaustedError(where + ": out of memory for " + what + " (" + size + ")");
 }
 
 absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where,
-                                  const std::atomic<bool>* stop) {
+                                  const std::atomic<bool>* stop, CubePlanes planes) {
   // Each pass skips its remaining work once told to stop; the status says so after it.
   const auto stopped = [stop] { return stop != nullptr && stop->load(); };
   const std::array<int, 3>& dims = volume.dims;
@@ -56,12 +62,21 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
   out.k = k;
   out.n = (1 << k) + 1;
   out.data_dims = dims;
-  const int n = out.n;
-  const size_t plane = static_cast<size_t>(n) * n;
+  if (planes == CubePlanes::kStandIns && UseStandIns(k, dims))
+    for (int a = 0; a < 3; ++a) {
+      AxisPlanes axis = StoredPlanesOf(k, dims[a]);
+      out.planes[a] = std::move(axis.planes);
+      out.plane_of[a] = std::move(axis.plane_of);
+    }
+  // Stored plane indices equal cube coordinates up to the data's last plane on every axis (all
+  // of those are stored, first), so the data box sits at the array's origin corner as in the
+  // whole cube; sx, sy, sz are the stored extents.
+  const int sx = out.stored(0), sy = out.stored(1), sz = out.stored(2);
+  const size_t plane = static_cast<size_t>(sx) * sy;
   try {
-    out.values.resize(plane * n);
+    out.values.resize(plane * sz);
   } catch (const std::bad_alloc&) {
-    return OutOfMemory(where, n);
+    return OutOfMemory(where, out);
   }
   float* cube = out.values.data();
 
@@ -74,7 +89,7 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
                  for (int z = block.min().z(); z <= block.max().z(); ++z) {
                    for (int y = block.min().y(); y <= block.max().y(); ++y) {
                      float* row = cube + (z - lo.z()) * plane +
-                                  static_cast<size_t>(y - lo.y()) * n + (block.min().x() - lo.x());
+                                  static_cast<size_t>(y - lo.y()) * sx + (block.min().x() - lo.x());
                      const int width = block.max().x() - block.min().x() + 1;
                      if (leaf_values == nullptr) {
                        std::fill(row, row + width, value);
@@ -101,16 +116,16 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
     for (int z = r.begin(); z != r.end() && !stopped(); ++z) {
       float* p = cube + z * plane;
       for (int y = 0; y < dy; ++y) {
-        float* row = p + static_cast<size_t>(y) * n;
-        std::fill(row + dx, row + n, row[dx - 1]);
+        float* row = p + static_cast<size_t>(y) * sx;
+        std::fill(row + dx, row + sx, row[dx - 1]);
       }
-      const float* last_row = p + static_cast<size_t>(dy - 1) * n;
-      for (int y = dy; y < n; ++y)
-        std::memcpy(p + static_cast<size_t>(y) * n, last_row, n * sizeof(float));
+      const float* last_row = p + static_cast<size_t>(dy - 1) * sx;
+      for (int y = dy; y < sy; ++y)
+        std::memcpy(p + static_cast<size_t>(y) * sx, last_row, sx * sizeof(float));
     }
   });
   if (stopped()) return absl::CancelledError(where + ": stopped");
-  tbb::parallel_for(tbb::blocked_range<int>(dz, n), [&](const tbb::blocked_range<int>& r) {
+  tbb::parallel_for(tbb::blocked_range<int>(dz, sz), [&](const tbb::blocked_range<int>& r) {
     const float* last_plane = cube + (dz - 1) * plane;
     for (int z = r.begin(); z != r.end() && !stopped(); ++z) {
       std::memcpy(cube + z * plane, last_plane, plane * sizeof(float));
@@ -130,11 +145,12 @@ int HierarchyLevelFor(const std::array<int, 3>& dims) {
 }
 
 absl::StatusOr<PaddedSamples> PadToHierarchyDomain(const Volume& volume,
-                                                   const std::atomic<bool>* stop) {
+                                                   const std::atomic<bool>* stop,
+                                                   CubePlanes planes) {
   const std::string where = "padding '" + volume.name + "'";
   // A module edge like LoadVolume: a throw from OpenVDB or TBB becomes a status here.
   try {
-    return Pad(volume, where, stop);
+    return Pad(volume, where, stop, planes);
   } catch (const std::bad_alloc&) {
     return absl::ResourceExhaustedError(where + ": out of memory");
   } catch (const std::exception& e) {

@@ -35,7 +35,10 @@ void ExpectPadded(const Volume& v, const PaddedSamples& p) {
   ASSERT_EQ(p.k, HierarchyLevelFor(v.dims));
   ASSERT_EQ(p.n, (1 << p.k) + 1);
   ASSERT_EQ(p.data_dims, v.dims);
-  ASSERT_EQ(p.values.size(), static_cast<size_t>(p.n) * p.n * p.n);
+  ASSERT_EQ(p.values.size(), p.stored_points());
+  if (!p.whole_cube()) {
+    for (int a = 0; a < 3; ++a) ASSERT_LE(p.stored(a), p.n);
+  }
   auto acc = v.grid->getConstAccessor();
   for (int z = 0; z < p.n; ++z)
     for (int y = 0; y < p.n; ++y)
@@ -125,7 +128,12 @@ TEST(VolumePadding, ThinAxis) {
   absl::StatusOr<PaddedSamples> p = PadToHierarchyDomain(*v);
   ASSERT_TRUE(p.ok()) << p.status();
   EXPECT_EQ(p->n, 65);
+  EXPECT_FALSE(p->whole_cube()) << "stand-ins for the planes deep in the padding";
   ExpectPadded(*v, *p);
+  absl::StatusOr<PaddedSamples> whole = PadToHierarchyDomain(*v, nullptr, CubePlanes::kAll);
+  ASSERT_TRUE(whole.ok()) << whole.status();
+  EXPECT_TRUE(whole->whole_cube());
+  ExpectPadded(*v, *whole);
 }
 
 TEST(VolumePadding, RejectsBadVolumes) {
@@ -147,12 +155,12 @@ TEST(VolumePadding, RejectsBadVolumes) {
 }
 
 // A cube the process cannot allocate is a ResourceExhausted status that says which cube and
-// how many bytes (it said only "out of memory": a 2049x2x2 volume needs a 32 GiB cube). Run
+// how many bytes (it said only "out of memory": a 2049x2x2 volume needed a 32 GiB cube). Run
 // in a child process whose address space is capped 32 MB above what it already uses; the
-// 300x2x2 volume pads to a 513^3 cube of 515 MiB.
+// 300x2x2 volume pads to a 513^3 cube of 515 MiB when every plane is stored.
 void PadUnderAddressSpaceCap(const Volume& volume) {
   testing::CapAddressSpaceAbove(rlim_t{32} << 20);
-  const auto padded = PadToHierarchyDomain(volume);
+  const auto padded = PadToHierarchyDomain(volume, nullptr, CubePlanes::kAll);
   const std::string message(padded.status().message());
   std::fprintf(stderr, "%s\n", message.c_str());
   std::_Exit(!padded.ok() && padded.status().code() == absl::StatusCode::kResourceExhausted ? 0

@@ -1,0 +1,62 @@
+#include "server/volume/stored_planes.h"
+
+#include <cstddef>
+
+namespace isostream {
+namespace {
+
+// Along one axis everything eta at a point reads lies within 3u of it (stored_planes.h); one
+// more u of margin.
+constexpr int64_t kReach = 4;
+
+int TrailingZeros(int c) { return __builtin_ctz(unsigned(c)); }
+
+int64_t StandInPoints(int k, const std::array<int, 3>& data_dims) {
+  int64_t points = 1;
+  for (int a = 0; a < 3; ++a) points *= int64_t(StoredPlanesOf(k, data_dims[a]).planes.size());
+  return points;
+}
+
+}  // namespace
+
+AxisPlanes StoredPlanesOf(int k, int data_points) {
+  const int last = 1 << k;
+  const int64_t data_last = data_points - 1;
+  AxisPlanes axis;
+  axis.plane_of.assign(std::size_t(last) + 1, -1);
+  std::vector<int> stand_in(std::size_t(k) + 1,
+                            -1);  // by trailing zeros: the coordinate standing in
+  for (int c = 0; c <= last; ++c) {
+    bool kept = c <= data_last;
+    if (!kept) {
+      const int v = TrailingZeros(c);
+      const int64_t reach = kReach << v;
+      const bool deep = c - reach >= data_last && c + reach <= last;
+      if (!deep || stand_in[std::size_t(v)] < 0) {
+        kept = true;
+        if (deep) stand_in[std::size_t(v)] = c;
+      }
+    }
+    if (kept) {
+      axis.plane_of[std::size_t(c)] = int(axis.planes.size());
+      axis.planes.push_back(c);
+    }
+  }
+  for (int c = 0; c <= last; ++c)
+    if (axis.plane_of[std::size_t(c)] < 0)
+      axis.plane_of[std::size_t(c)] =
+          axis.plane_of[std::size_t(stand_in[std::size_t(TrailingZeros(c))])];
+  return axis;
+}
+
+bool UseStandIns(int k, const std::array<int, 3>& data_dims) {
+  const int64_t side = (int64_t{1} << k) + 1;
+  return 2 * StandInPoints(k, data_dims) <= side * side * side;
+}
+
+int64_t StoredPointCount(int k, const std::array<int, 3>& data_dims) {
+  const int64_t side = (int64_t{1} << k) + 1;
+  return UseStandIns(k, data_dims) ? StandInPoints(k, data_dims) : side * side * side;
+}
+
+}  // namespace isostream
