@@ -21,9 +21,10 @@ void AddVolumeOptions(CLI::App* cmd, VolumeArgs* args) {
       ->check(CLI::Range(0, 1024));
   cmd->add_option("--cache-dir", args->cache_dir, "hierarchy cache directory");
   cmd->add_flag("--no-cache", args->no_cache, "always rebuild the hierarchy, store nothing");
-  // The hierarchy holds a volume as a cube of at most 1025^3 points, its longest side cubed.
-  cmd->add_option("--max-dim", args->max_dim, "largest accepted samples per axis (2..1025)")
-      ->check(CLI::Range(2, 1025));
+  // The hierarchy pads a volume to the cube of its longest side, at most 4097 (k = 12); it stores
+  // at most 1025^3 of the cube's points (a thin volume its data's planes and stand-ins).
+  cmd->add_option("--max-dim", args->max_dim, "largest accepted samples per axis (2..4097)")
+      ->check(CLI::Range(2, 4097));
 }
 
 namespace {

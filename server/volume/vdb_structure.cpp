@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <cctype>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <map>
@@ -36,17 +37,24 @@ struct Defect {
 };
 
 // The memory one float tree's nodes may take: twice what a volume within the limits can need
-// (its active box, at most max_dim per axis, meets at most ceil(max_dim / width) + 1 nodes of a
-// width per axis; the slack is for inactive nodes beside it). OpenVDB allocates every node a
-// file names before the active box can be checked, so a damaged or crafted file otherwise costs
-// ~30x its size: an internal node of 4096^3 voxels is ~260 KB from ~8 KB of file.
+// (the slack is for inactive nodes beside it). Its active box, d0 x d1 x d2 with every side at
+// most max_dim and at most max_voxels in all, meets at most ceil(d / w) + 1 nodes of width w per
+// axis: at most (ceil(max_dim / w) + 1)^3, and, as ceil(d / w) + 1 <= d / w + 2, at most
+// max_voxels / w^3 + 6 max_dim^2 / w^2 + 12 max_dim / w + 8 (the bound that holds when max_dim
+// allows long thin boxes: 4097 x 4097 x 60 is as many voxels as 1025^3). OpenVDB allocates every
+// node a file names before the active box can be checked, so a damaged or crafted file otherwise
+// costs ~30x its size: an internal node of 4096^3 voxels is ~260 KB from ~8 KB of file.
 class NodeBudget {
  public:
-  explicit NodeBudget(const VolumeLimits& limits) : max_dim_(limits.max_dim) {
+  explicit NodeBudget(const VolumeLimits& limits) : limits_(limits) {
+    const double dim = limits.max_dim, voxels = double(limits.max_voxels);
     for (int l = 0; l < 3; ++l) {
-      const int64_t width = int64_t{1} << kWidthLog2[l];
-      const int64_t across = (max_dim_ + width - 1) / width + 1;
-      max_bytes_ += 2 * across * across * across * kBytes[l];
+      const double width = double(int64_t{1} << kWidthLog2[l]);
+      const double across = std::ceil(dim / width) + 1;
+      const double nodes = std::min(across * across * across, voxels / (width * width * width) +
+                                                                  6 * dim * dim / (width * width) +
+                                                                  12 * dim / width + 8);
+      max_bytes_ += int64_t(2 * nodes) * kBytes[l];
     }
   }
   void StartTree() { bytes_ = 0; }
@@ -55,8 +63,8 @@ class NodeBudget {
   bool Add(int level) { return (bytes_ += kBytes[level]) <= max_bytes_; }
   std::string Exceeded(const std::string& where) const {
     return where + "'s tree would take more than " + std::to_string(max_bytes_ >> 20) +
-           " MB, twice what a volume within the limit of " + std::to_string(max_dim_) +
-           " samples per axis can need";
+           " MB, twice what a volume within the limits of " + std::to_string(limits_.max_dim) +
+           " samples per axis and " + std::to_string(limits_.max_voxels) + " in all can need";
   }
 
  private:
@@ -66,7 +74,7 @@ class NodeBudget {
   static constexpr int kWidthLog2[3] = {12, 7, 3};
   static constexpr int64_t kBytes[3] = {sizeof(Internal5), sizeof(Internal4),
                                         sizeof(Leaf) + Leaf::SIZE * sizeof(float)};
-  int max_dim_;
+  VolumeLimits limits_;
   int64_t max_bytes_ = 0;
   int64_t bytes_ = 0;
 };

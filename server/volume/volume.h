@@ -32,8 +32,10 @@ struct Volume {
 using VolumePtr = std::shared_ptr<const Volume>;
 
 // Limits a loader enforces before allocating anything. Both the CLI and the daemon set them.
+// max_voxels also bounds the points the hierarchy stores (a long side pads to a cube, of which a
+// thin volume stores only its data's planes and stand-ins for the rest: stored_planes.h).
 struct VolumeLimits {
-  int max_dim = 1025;                                // samples per axis
+  int max_dim = 4097;                                // samples per axis (the cube's largest side)
   int64_t max_voxels = int64_t{1025} * 1025 * 1025;  // samples in all
 };
 

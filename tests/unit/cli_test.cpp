@@ -199,9 +199,11 @@ TEST(Cli, VolumeSpecsWrongAsWrittenAreUsageErrors) {
       {"sphere:9:3", "expected sphere:N", 2},
       {"noise:9:-1", "SEED '-1'", 2},
       {"sphere:1", "need at least 2 samples per axis", 2},
-      {"sphere:2000", "exceed the limit of 1025 samples per axis", 2},  // --max-dim's default
-      // No larger side can be held (its cube is past the 1025^3 points a volume may take).
-      {"sphere:1026 --max-dim 1026", "--max-dim: Value 1026 not in range 2 to 1025", 2},
+      {"sphere:5000", "exceed the limit of 4097 samples per axis", 2},  // --max-dim's default
+      {"sphere:2000", "exceed the limit of 1076890625 samples", 2},     // past 1025^3 in all
+      {"sphere:300 --max-dim 299", "exceed the limit of 299 samples per axis", 2},
+      // No larger side can be held (its cube's k would pass 12).
+      {"sphere:1026 --max-dim 4098", "--max-dim: Value 4098 not in range 2 to 4097", 2},
       {"raw:" + raw + ":2x2:uint8", "dims '2x2' are not NXxNYxNZ", 2},
       {"raw:" + raw + ":2x2x2:float", "unsupported type 'float'", 2},
       {"raw:" + raw + ":2x2x2:uint8:middle", "byte order 'middle'", 2},

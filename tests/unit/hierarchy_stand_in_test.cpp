@@ -6,7 +6,9 @@
 
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <random>
 #include <string>
@@ -15,6 +17,7 @@
 #include "server/extract/extractor.h"
 #include "server/hierarchy/hierarchy.h"
 #include "server/hierarchy/hierarchy_cache.h"
+#include "server/hierarchy/prepared_volume.h"
 #include "server/volume/padding.h"
 #include "server/volume/stored_planes.h"
 
@@ -173,6 +176,36 @@ TEST(HierarchyStandIns, TheCacheKeepsAStoreOfStandIns) {
   EXPECT_EQ(built->LinearSamples(), read->LinearSamples());
   EXPECT_EQ(built->LinearEtaCodes(), read->LinearEtaCodes());
   std::filesystem::remove_all(dir);
+}
+
+// A 1026-sample side pads to the 2049^3 cube (8.6 G points, past the default limit of 1025^3):
+// stored with stand-ins it is ~7 M points, which the limit bounds instead.
+TEST(HierarchyStandIns, TheLimitBoundsTheStoredPoints) {
+  const std::string path = ::testing::TempDir() + "/isostream-stand-in-long.raw";
+  {
+    std::ofstream out(path, std::ios::binary);
+    for (int i = 0; i < 1026 * 2 * 2; ++i) out.put(char(i % 1026 < 500 ? 10 : 200));
+  }
+  const std::string spec = "raw:" + path + ":1026x2x2:uint8";
+  auto prepared =
+      PrepareVolume(spec, VolumeLimits{}, HierarchyCacheOptions{}, HierarchyBuildOptions{});
+  ASSERT_TRUE(prepared.ok()) << prepared.status();
+  const Hierarchy& h = *prepared->hierarchy;
+  EXPECT_EQ(h.n(), 2049);
+  EXPECT_LT(h.stored_point_count(), size_t(10'000'000));
+  EXPECT_EQ(h.sample(2048, 2048, 2048), 200.0f);  // a stand-in: the last data sample's value
+  EXPECT_EQ(h.sample(499, 1000, 7), 10.0f);
+
+  VolumeLimits limits;
+  limits.max_voxels = 1'000'000;
+  prepared = PrepareVolume(spec, limits, HierarchyCacheOptions{}, HierarchyBuildOptions{});
+  ASSERT_EQ(prepared.status().code(), absl::StatusCode::kResourceExhausted) << prepared.status();
+  EXPECT_NE(prepared.status().message().find("points of a 2049^3 cube (its longest side, cubed, "
+                                             "less the planes deep in its padding), past the "
+                                             "limit of 1000000"),
+            std::string::npos)
+      << prepared.status();
+  std::remove(path.c_str());
 }
 
 }  // namespace
