@@ -399,6 +399,27 @@ TEST(Cli, InfoPrintsTheTriangleCountByEps) {
   }
 }
 
+// A thin volume stores its data's planes and stand-ins for the rest of its cube's padding, and
+// says so: 600x9x5 pads to the 1025^3 cube (1.08 G points), of which it stores 1.5 M.
+TEST(Cli, InfoSaysWhichPlanesAThinVolumeStores) {
+  const std::string raw = TempPath("cli-thin.f32");
+  {
+    std::vector<float> values;
+    for (int z = 0; z < 5; ++z)
+      for (int y = 0; y < 9; ++y)
+        for (int x = 0; x < 600; ++x)
+          values.push_back(float(std::sin(0.02 * x) + 0.1 * y - 0.2 * z));
+    ASSERT_TRUE(WriteFileBytes(raw, std::string_view(reinterpret_cast<const char*>(values.data()),
+                                                     values.size() * sizeof(float)))
+                    .ok());
+  }
+  const CliRun r = Cli("info --volume raw:" + raw + ":600x9x5:float32 --no-cache");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("cube 1025^3 (k = 10)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("stored        636 x 51 x 47 planes of the cube's"), std::string::npos)
+      << r.output;
+}
+
 // Spaces around the numbers of a list are allowed on either side; an empty item is not.
 TEST(Cli, NumberListsAllowSpacesAroundItems) {
   EXPECT_EQ(Cli("info --volume sphere:9 --iso ' 0.5 , 0.7 ' --no-cache").code, 0);
