@@ -1,7 +1,7 @@
 // The hierarchy needs a cube of (2^k+1)^3 samples. PadToHierarchyDomain embeds a volume's
 // samples at the cube's origin corner (sample (i,j,k) -> cube point (i,j,k)) and fills the rest
-// by clamping to the nearest data sample (edge replication). Where that saves at least half of
-// the cube, only the planes stored_planes.h chooses are held.
+// by clamping to the nearest data sample (edge replication). Where that saves at least a quarter
+// of the cube, only the planes stored_planes.h chooses are held.
 //
 // Why edge replication: the padding must never create a surface that is not in the data.
 // A constant fill (e.g. below the minimum) would close every open surface with a wall along the
@@ -24,7 +24,7 @@ namespace isostream {
 int HierarchyLevelFor(const std::array<int, 3>& dims);
 
 enum class CubePlanes {
-  kStandIns,  // stand-ins for the planes deep in the padding, where they save half the cube
+  kStandIns,  // stand-ins for the planes deep in the padding, where they save a quarter of the cube
   kAll,       // every plane (tests compare the two)
 };
 

@@ -51,7 +51,7 @@ AxisPlanes StoredPlanesOf(int k, int data_points) {
 
 bool UseStandIns(int k, const std::array<int, 3>& data_dims) {
   const int64_t side = (int64_t{1} << k) + 1;
-  return 2 * StandInPoints(k, data_dims) <= side * side * side;
+  return 4 * StandInPoints(k, data_dims) <= 3 * side * side * side;
 }
 
 int64_t StoredPointCount(int k, const std::array<int, 3>& data_dims) {
