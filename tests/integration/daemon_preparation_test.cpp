@@ -5,17 +5,24 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <string>
 #include <thread>
 #include <utility>
 #include <vector>
 
+#include "server/extract/extractor.h"
+#include "server/hierarchy/hierarchy.h"
+#include "server/volume/load.h"
+#include "server/volume/padding.h"
 #include "tests/integration/daemon_fixture.h"
 #include "tests/unit/volume_files.h"
 
@@ -72,6 +79,56 @@ TEST(NoPreloadDaemon, VolumeInfoOfATurnedNiftiFile) {
   EXPECT_EQ(info->origin().y(), 20);
   EXPECT_EQ(info->origin().z(), 30);
   EXPECT_EQ(daemon.Stop(), 0);
+}
+
+// A thin volume, whose cube's padding is held as stand-ins (stored_planes.h), served from a
+// catalogue: frames equal a direct extraction from the whole cube's hierarchy, the histogram
+// counts the data's samples, and a second start reads the hierarchy from the cache.
+TEST(CachedDaemon, ServesAThinVolumeFromTheCache) {
+  ScratchDir dir;
+  const std::array<int, 3> dims = {300, 9, 7};
+  std::vector<float> values;
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x)
+        values.push_back(0.15f + 0.2f * float(std::sin(0.05 * x) * std::cos(0.4 * y - 0.3 * z)));
+  const std::string path = dir.path() + "/thin.f32";
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(values.data()),
+             std::streamsize(values.size() * sizeof(float)));
+  const std::string spec = "raw:" + path + ":300x9x7:float32";
+
+  auto volume = LoadVolume(spec);
+  ASSERT_TRUE(volume.ok()) << volume.status();
+  auto whole = PadToHierarchyDomain(**volume, nullptr, CubePlanes::kAll);
+  ASSERT_TRUE(whole.ok()) << whole.status();
+  auto whole_cube = BuildHierarchy(std::move(*whole));
+  ASSERT_TRUE(whole_cube.ok()) << whole_cube.status();
+  const glm::dvec3 eye(400, -90, 60);
+  auto direct = Extract(**whole_cube, GridToWorld{}, DirectRequest(0.01, eye));
+  ASSERT_TRUE(direct.ok()) << direct.status();
+  ASSERT_GT(direct->mesh.triangle_count(), 1000u);
+
+  for (const std::string outcome : {"miss (built)", "hit"}) {
+    SCOPED_TRACE(outcome);
+    DaemonProcess daemon;
+    const std::string log = dir.path() + "/isostreamd-" + outcome.substr(0, 3) + ".log";
+    ASSERT_TRUE(
+        daemon.Start({"--volume", "thin=" + spec, "--cache-dir", dir.path() + "/cache"}, log));
+    auto c = ConnectTo(daemon);
+    auto info = c->GetVolumeInfo("thin", 4);
+    ASSERT_TRUE(info.ok()) << info.status();
+    uint64_t counted = 0;
+    for (const uint64_t n : info->histogram()) counted += n;
+    EXPECT_EQ(counted, values.size());
+    auto frame = c->Fetch(MakeView("thin", 3, 0.01, eye, pb::RAW), [](const pb::FrameChunk&) {});
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    ExpectSameFrame(direct->mesh, frame->mesh, 0.0f);
+    EXPECT_EQ(daemon.Stop(), 0);
+    std::ifstream in(log);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find("(hierarchy cache: " + outcome + ")"), std::string::npos) << text;
+  }
 }
 
 // A cache directory whose entries cannot be looked up (here a name longer than the file system
