@@ -1,5 +1,5 @@
-// Integration tests of isostreamd preparing its volumes: on first use with --no-preload, and
-// slowly (the ISOSTREAMD_TEST_PREPARE_DELAY_MS hook), where views wait for a preparation: the
+// Integration tests of isostreamd preparing its volumes: on first use with --no-preload, a thin
+// volume through the hierarchy cache, and slowly (the ISOSTREAMD_TEST_PREPARE_DELAY_MS hook), where views wait for a preparation: the
 // frame deadline is not charged the wait, and views superseded meanwhile are counted. Each test
 // starts its own daemon on 127.0.0.1 (daemon_process.h); every wait is bounded.
 #include <gtest/gtest.h>
