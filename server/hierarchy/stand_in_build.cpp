@@ -36,6 +36,9 @@ class StandInBuilder {
       of_[a] = s->plane_of[a].data();
       stored_[a] = s->stored(a);
     }
+    stride_[0] = 1;
+    stride_[1] = stored_[0];
+    stride_[2] = int64_t(stored_[0]) * stored_[1];
   }
 
   bool Run(const HierarchyBuildOptions& options) {
@@ -53,11 +56,6 @@ class StandInBuilder {
 
  private:
   bool Stopped() const { return stop_ && stop_->load(std::memory_order_relaxed); }
-
-  // The stored point standing for cube point (x, y, z), in the samples' array.
-  size_t At(int x, int y, int z) const {
-    return (size_t(of_[2][z]) * stored_[1] + of_[1][y]) * stored_[0] + of_[0][x];
-  }
 
   // Every brick whole: the samples, eta 0 for now (the 8 cube corners keep it), zeros beyond
   // the stored planes so the store is deterministic. One layer of bricks per task.
@@ -100,58 +98,80 @@ class StandInBuilder {
       }
     // Edge centres (one odd axis), face centres (two), cube centres (three): axis a is odd
     // where bit a of the mask is set.
-    for (const unsigned mask : {1u, 2u, 4u, 3u, 5u, 6u, 7u}) {
-      const std::vector<int>* on[3];
-      for (int a = 0; a < 3; ++a) on[a] = (mask >> a) & 1 ? &odd[a] : &even[a];
-      if (on[0]->empty() || on[1]->empty() || on[2]->empty()) continue;
-      const int kind = __builtin_popcount(mask);
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, on[2]->size()),
-                        [&](const tbb::blocked_range<size_t>& r) {
-                          for (size_t iz = r.begin(); iz != r.end() && !Stopped(); ++iz)
-                            for (const int y : *on[1])
-                              for (const int x : *on[0]) Point(h, kind, mask, {x, y, (*on[2])[iz]});
-                        });
-    }
+    Pass<1>(h, odd, even);
+    Pass<2>(h, odd, even);
+    Pass<4>(h, odd, even);
+    Pass<3>(h, odd, even);
+    Pass<5>(h, odd, even);
+    Pass<6>(h, odd, even);
+    Pass<7>(h, odd, even);
+  }
+
+  template <unsigned kMask>
+  void Pass(int h, const std::vector<int> odd[3], const std::vector<int> even[3]) {
+    const std::vector<int>* on[3];
+    for (int a = 0; a < 3; ++a) on[a] = (kMask >> a) & 1 ? &odd[a] : &even[a];
+    if (on[0]->empty() || on[1]->empty() || on[2]->empty()) return;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, on[2]->size()),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t iz = r.begin(); iz != r.end() && !Stopped(); ++iz)
+                          for (const int y : *on[1])
+                            for (const int x : *on[0]) Point<kMask>(h, {x, y, (*on[2])[iz]});
+                      });
   }
 
   // EvenEndSign in lattice units: which way the refinement edge of an odd coordinate runs.
   static int Sign(int lattice) { return (lattice & 3) == 3 ? 1 : -1; }
 
-  void Point(int h, int kind, unsigned mask, const std::array<int, 3>& p) {
+  // How far the samples' array moves when cube coordinate c moves by delta along `axis`.
+  int64_t Step(int axis, int c, int delta) const {
+    return (int64_t(of_[axis][c + delta]) - of_[axis][c]) * stride_[axis];
+  }
+
+  template <unsigned kMask>
+  void Point(int h, const std::array<int, 3>& p) {
+    constexpr int kKind = __builtin_popcount(kMask);
     const int u = 1 << h;
+    const int64_t at =
+        (int64_t(of_[2][p[2]]) * stored_[1] + of_[1][p[1]]) * stored_[0] + of_[0][p[0]];
     // The refinement edge (p - d, p + d): along the odd axis for an edge centre, else one step
     // of the lattice along every odd axis, in EvenEndSign's direction.
-    int d[3] = {0, 0, 0};
-    for (int a = 0; a < 3; ++a)
-      if ((mask >> a) & 1) d[a] = kind == 1 ? u : Sign(p[a] >> h) * u;
+    int64_t plus = 0, minus = 0;
+    for (int a = 0; a < 3; ++a) {
+      if (!((kMask >> a) & 1)) continue;
+      const int d = kKind == 1 ? u : Sign(p[a] >> h) * u;
+      plus += Step(a, p[a], d);
+      minus += Step(a, p[a], -d);
+    }
     float worst = 0;
-    if (kind == 1) {
+    if constexpr (kKind == 1) {
       // The previous scale's cube centres half a step away on every axis, inside the cube.
       if (h > 0) {
         const int half = u / 2;
-        for (int dz = -half; dz <= half; dz += u)
-          for (int dy = -half; dy <= half; dy += u)
-            for (int dx = -half; dx <= half; dx += u) {
-              const int x = p[0] + dx, y = p[1] + dy, z = p[2] + dz;
-              if (x < 0 || y < 0 || z < 0 || x > last_ || y > last_ || z > last_) continue;
-              worst = std::max(worst, v_[At(x, y, z)]);
-            }
+        int64_t step[3][2];
+        bool inside[3][2];
+        for (int a = 0; a < 3; ++a) {
+          inside[a][0] = p[a] - half >= 0;
+          inside[a][1] = p[a] + half <= last_;
+          step[a][0] = inside[a][0] ? Step(a, p[a], -half) : 0;
+          step[a][1] = inside[a][1] ? Step(a, p[a], half) : 0;
+        }
+        for (int sz = 0; sz < 2; ++sz)
+          for (int sy = 0; sy < 2; ++sy)
+            for (int sx = 0; sx < 2; ++sx)
+              if (inside[0][sx] && inside[1][sy] && inside[2][sz])
+                worst = std::max(worst, v_[at + step[0][sx] + step[1][sy] + step[2][sz]]);
       }
     } else {
       // Face centres: the edge centres one step along each odd axis; cube centres: the face
       // centres one step along each axis.
       for (int a = 0; a < 3; ++a) {
-        if (!((mask >> a) & 1)) continue;
-        std::array<int, 3> q = p;
-        q[a] = p[a] - u;
-        worst = std::max(worst, v_[At(q[0], q[1], q[2])]);
-        q[a] = p[a] + u;
-        worst = std::max(worst, v_[At(q[0], q[1], q[2])]);
+        if (!((kMask >> a) & 1)) continue;
+        worst = std::max(worst, v_[at + Step(a, p[a], -u)]);
+        worst = std::max(worst, v_[at + Step(a, p[a], u)]);
       }
     }
-    const size_t at = At(p[0], p[1], p[2]);
-    v_[at] = DiamondEta(v_[at], v_[At(p[0] + d[0], p[1] + d[1], p[2] + d[2])],
-                        v_[At(p[0] - d[0], p[1] - d[1], p[2] - d[2])], worst);
+    v_[at] = DiamondEta(v_[at], v_[at + plus], v_[at + minus], worst);
   }
 
   // The float eta of every stored point but the cube's corners, rounded up to bfloat16, into
@@ -180,6 +200,7 @@ class StandInBuilder {
   const int* planes_[3];
   const int* of_[3];
   int stored_[3];
+  int64_t stride_[3];  // of a stored plane index along each axis in the samples' array
   int last_;
   const std::atomic<bool>* stop_ = nullptr;
 };
