@@ -9,6 +9,7 @@
 
 #include "server/volume/generators.h"
 #include "server/volume/padding.h"
+#include "server/volume/stored_planes.h"
 #include "shared/frame_notes.h"
 #include "shared/malloc_tuning.h"
 
@@ -67,26 +68,31 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim,
   return absl::OkStatus();
 }
 
-// The hierarchy cube of a generator spec Check has accepted.
-uint64_t GeneratorCube(const std::string& spec) {
+// The planes per axis a generator spec Check has accepted stores: its whole cube's, or, for a
+// side a little past a power of two, its own and stand-ins for the rest of the padding
+// (stored_planes.h: sphere:514 keeps 551 of its 1025^3 cube's planes per axis).
+uint64_t GeneratorStoredPlanes(const std::string& spec) {
   const int n = std::stoi(spec.substr(spec.find(':') + 1));  // stops at a noise seed's ':'
-  return (uint64_t{1} << HierarchyLevelFor({n, n, n})) + 1;
+  const int k = HierarchyLevelFor({n, n, n});
+  if (!UseStandIns(k, {n, n, n})) return (uint64_t{1} << k) + 1;
+  return StoredPlanesOf(k, n).planes.size();
 }
 
 // What a generator volume's hierarchy store will take: nearly all a prepared volume holds,
 // known before preparing it.
 uint64_t GeneratorStoreBytes(const std::string& spec) {
-  const uint64_t bricks = (GeneratorCube(spec) + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
+  const uint64_t bricks =
+      (GeneratorStoredPlanes(spec) + HierarchyBrick::kMask) >> HierarchyBrick::kLog2;
   return bricks * bricks * bricks * sizeof(HierarchyBrick);
 }
 
-// What a generator volume's preparation holds beside the store while it runs: its padded cube
-// of float samples, and half as much again for the generated grid and what the build allocates
-// (measured peaks over the store: 548 MB at 513^3 = 1.01 x the cube's 540 MB, and 90 MB at
-// 257^3 = 1.32 x; BENCHMARKS.md).
+// What a generator volume's preparation holds beside the store while it runs: its padded
+// samples (the stored planes' floats), and half as much again for the generated grid and what
+// the build allocates (measured peaks over the store: 548 MB at 513^3 = 1.01 x the cube's 540 MB,
+// and 90 MB at 257^3 = 1.32 x; BENCHMARKS.md).
 uint64_t GeneratorSampleBytes(const std::string& spec) {
-  const uint64_t cube = GeneratorCube(spec);
-  return 6 * cube * cube * cube;
+  const uint64_t planes = GeneratorStoredPlanes(spec);
+  return 6 * planes * planes * planes;
 }
 
 absl::Status ShuttingDown() {

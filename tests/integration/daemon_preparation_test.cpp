@@ -1,7 +1,8 @@
 // Integration tests of isostreamd preparing its volumes: on first use with --no-preload, a thin
-// volume through the hierarchy cache, and slowly (the ISOSTREAMD_TEST_PREPARE_DELAY_MS hook), where views wait for a preparation: the
-// frame deadline is not charged the wait, and views superseded meanwhile are counted. Each test
-// starts its own daemon on 127.0.0.1 (daemon_process.h); every wait is bounded.
+// volume through the hierarchy cache, and slowly (the ISOSTREAMD_TEST_PREPARE_DELAY_MS hook), where
+// views wait for a preparation: the frame deadline is not charged the wait, and views superseded
+// meanwhile are counted. Each test starts its own daemon on 127.0.0.1 (daemon_process.h); every
+// wait is bounded.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -403,6 +404,19 @@ std::string PrepareTwoAtOnce(int generator_mb) {
 
 // Where `line` first appears in `log` (npos: nowhere), for the two volumes either way round.
 size_t At(const std::string& log, const std::string& line) { return log.find(line); }
+
+// sphere:130 pads to the 257^3 cube but stores 157 planes per axis (stand-ins for the rest):
+// 23 MiB of store and 22 MiB of samples, where the whole cube would be 105 and 97 MiB. It is
+// charged what it stores (a budget of 60 MiB refused it as needing 105 MiB).
+TEST(GeneratorBudget, AVolumeStoringStandInsIsChargedWhatItStores) {
+  ScratchDir dir;
+  DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--generator-mb", "60", "--no-cache"}, dir.path() + "/isostreamd.log"));
+  auto c = ConnectTo(daemon);
+  const auto frame = c->Fetch(MakeView("sphere:130", 1, 0.01, glm::dvec3(2, 2, 2)));
+  EXPECT_TRUE(frame.ok()) << frame.status();
+  EXPECT_EQ(daemon.Stop(), 0);
+}
 
 TEST(GeneratorBudget, PreparationsWhoseSamplesDoNotFitTogetherRunOneAfterTheOther) {
   const std::string log = PrepareTwoAtOnce(40);
