@@ -132,6 +132,22 @@ TEST(HierarchyStandIns, EveryCubePointReadsTheWholeCubesSampleAndEta) {
   }
 }
 
+// Samples are checked as the whole cube's builder checks them: a non-finite one anywhere, in the
+// data's planes or a stand-in's, is refused rather than made into eta.
+TEST(HierarchyStandIns, NonFiniteSamplesAreRefused) {
+  const VolumePtr v = NoisyVolume({40, 6, 3}, 5);
+  for (const bool in_stand_in : {false, true}) {
+    auto samples = PadToHierarchyDomain(*v);
+    ASSERT_TRUE(samples.ok());
+    ASSERT_FALSE(samples->whole_cube());
+    const size_t at = in_stand_in ? samples->values.size() - 2 : 7;
+    samples->values[at] = in_stand_in ? INFINITY : std::nanf("");
+    const auto h = BuildHierarchy(std::move(*samples));
+    EXPECT_EQ(h.status().code(), absl::StatusCode::kInvalidArgument) << h.status();
+    EXPECT_NE(h.status().message().find("non-finite sample"), std::string::npos) << h.status();
+  }
+}
+
 TEST(HierarchyStandIns, ExtractsTheWholeCubesMesh) {
   const Pair p = BuildBoth({100, 10, 40}, 7);
   ASSERT_TRUE(p.whole_h && p.stand_in_h);
