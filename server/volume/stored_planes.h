@@ -44,7 +44,7 @@ AxisPlanes StoredPlanesOf(int k, int data_points);
 int64_t StoredPointCount(int k, const std::array<int, 3>& data_dims);
 
 // Whether the stand-ins are worth it: they keep at most 3/4 of the cube's points. The
-// stand-in builder is ~3x slower per point than the whole cube's (tiles of a regular lattice),
+// stand-in builder is ~2x slower per point than the whole cube's (tiles of a regular lattice),
 // but a build's time is mostly first touches of its memory: 300x400x500 (53.5% of its 513^3
 // cube) prepared in about the same time either way, in 0.81 GB instead of 1.41. Nearer a cube,
 // the whole cube's builder wins.
