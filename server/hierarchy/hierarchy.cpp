@@ -38,6 +38,9 @@
 //    edge centres need, overwrites their samples in the linear array: nothing reads those
 //    samples again (a diamond reads the samples at its refinement edge's ends, coarser
 //    points, and the brick store already holds all samples).
+// That is the whole cube's builder. Where stand-ins hold the planes deep in the padding
+// (stored_planes.h), the stored planes are no regular lattice: stand_in_build.cpp evaluates the
+// same definition point by point through the stand-in maps, in the same arithmetic.
 #include "server/hierarchy/hierarchy.h"
 
 #include <sys/mman.h>
