@@ -161,6 +161,14 @@ TEST_F(FileIo, WrittenInPlaceWhereReplacingCannotWork) {
   EXPECT_EQ(*ReadFileBytes(theirs), "new");
 }
 
+// A full disk may show only when the file is closed (the bytes were buffered): /dev/full takes
+// every write and fails the flush. That is a failed write, named, not a success.
+TEST_F(FileIo, AFailureThatShowsOnlyWhenFlushedIsAFailedWrite) {
+  const absl::Status s = WriteFileBytes("/dev/full", "a few bytes");
+  EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted) << s;
+  EXPECT_EQ(s.message(), "cannot write /dev/full: No space left on device");
+}
+
 TEST_F(FileIo, OutputPathsAreCheckedBeforeTheWork) {
   EXPECT_TRUE(CheckOutputPath(Path("new.ply")).ok());
   EXPECT_TRUE(CheckOutputPath("/dev/null").ok());

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -250,6 +251,152 @@ TEST(MeshGlb, MalformedFilesAreRejected) {
   edited = bytes;
   for (size_t i = 20 + json_length + 8; i < 20 + json_length + 40; ++i) edited[i] = '\x7f';
   EXPECT_FALSE(ParseGlb(edited).ok());
+}
+
+// A GLB container around `document` and `bin` built here, not by the writer: each chunk padded
+// to 4 bytes unless `pad` is false, the BIN chunk given `bin_type`.
+std::string Container(const json& document, const std::string& bin, bool pad = true,
+                      uint32_t bin_type = 0x004E4942) {
+  std::string text = document.dump();
+  if (pad) text.append((4 - text.size() % 4) % 4, ' ');
+  std::string padded_bin = bin;
+  padded_bin.append((4 - padded_bin.size() % 4) % 4, '\0');
+  auto u32 = [](std::string* out, uint32_t v) {
+    out->append(reinterpret_cast<const char*>(&v), 4);
+  };
+  std::string out;
+  u32(&out, 0x46546C67);
+  u32(&out, 2);
+  u32(&out, uint32_t(12 + 8 + text.size() + 8 + padded_bin.size()));
+  u32(&out, uint32_t(text.size()));
+  u32(&out, 0x4E4F534A);
+  out += text;
+  u32(&out, uint32_t(padded_bin.size()));
+  u32(&out, bin_type);
+  out += padded_bin;
+  return out;
+}
+
+// Colours are stored as 8-bit unorms: what is past [0, 1] is clamped, not wrapped, and what is
+// not a number is 0.
+TEST(MeshGlb, ColoursOutsideZeroToOneAreClamped) {
+  GlbOptions options;
+  options.surface_colors = {{2.0f, -1.0f, NAN, 0.5f}};
+  const ParsedGlb glb = Parse(Serialize(MakeGrid(3), options));
+  const json& extension = glb.document["meshes"][0]["primitives"][0]["extensions"][kDraco];
+  const json& view = glb.document["bufferViews"][extension["bufferView"].get<size_t>()];
+  draco::DecoderBuffer buffer;
+  buffer.Init(glb.bin.data() + view.value("byteOffset", size_t{0}),
+              view["byteLength"].get<size_t>());
+  draco::Decoder decoder;
+  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
+  ASSERT_TRUE(decoded.ok()) << decoded.status().error_msg();
+  const draco::PointAttribute* color =
+      decoded.value()->GetAttributeByUniqueId(extension["attributes"]["COLOR_0"].get<uint32_t>());
+  ASSERT_NE(color, nullptr);
+  for (uint32_t p = 0; p < decoded.value()->num_points(); ++p) {
+    uint8_t rgba[4];
+    color->GetMappedValue(draco::PointIndex(p), rgba);
+    ASSERT_EQ(rgba[0], 255) << "point " << p;
+    ASSERT_EQ(rgba[1], 0) << "point " << p;
+    ASSERT_EQ(rgba[2], 0) << "point " << p;
+    ASSERT_EQ(rgba[3], 128) << "point " << p;
+  }
+}
+
+// The indices accessor's component type can hold every vertex index (glTF: UNSIGNED_SHORT up to
+// 65535 vertices, UNSIGNED_INT past that), as a loader that reads accessors sizes its buffers.
+TEST(MeshGlb, IndexComponentTypeHoldsEveryVertex) {
+  for (const int n : {8, 260}) {  // 81 and 68,121 vertices
+    SCOPED_TRACE(n);
+    const OrderedMesh mesh = MakeGrid(n);
+    const ParsedGlb glb = Parse(Serialize(mesh, GlbOptions{}));
+    const json& primitive = glb.document["meshes"][0]["primitives"][0];
+    const json& indices = glb.document["accessors"][primitive["indices"].get<size_t>()];
+    const json& position =
+        glb.document["accessors"][primitive["attributes"]["POSITION"].get<size_t>()];
+    ASSERT_EQ(position["count"].get<size_t>(), mesh.vertex_count());
+    EXPECT_EQ(indices["componentType"], mesh.vertex_count() > 65535 ? 5125 : 5123);
+  }
+}
+
+// Documents the reader cannot take as written are refused with the reason, not read otherwise
+// (a buffer view past its chunk read beyond the file's bytes).
+TEST(MeshGlb, DocumentsItCannotReadAreRefusedWithTheReason) {
+  const OrderedMesh mesh = MakeGrid(8);
+  const ParsedGlb glb = Parse(Serialize(mesh, GlbOptions{}));
+  ASSERT_TRUE(ParseGlb(Container(glb.document, glb.bin)).ok());  // the container itself reads
+  auto refused = [&](const std::string& bytes, absl::StatusCode code, const std::string& message) {
+    const absl::StatusOr<OrderedMesh> parsed = ParseGlb(bytes);
+    ASSERT_FALSE(parsed.ok()) << message;
+    EXPECT_EQ(parsed.status().code(), code) << parsed.status();
+    EXPECT_EQ(parsed.status().message(), message);
+  };
+  auto edited = [&](const std::function<void(json&)>& edit) {
+    json document = glb.document;
+    edit(document);
+    return Container(document, glb.bin);
+  };
+  refused(edited([](json& d) { d["extensionsRequired"].push_back("KHR_materials_volume"); }),
+          absl::StatusCode::kUnimplemented, "GLB requires extension \"KHR_materials_volume\"");
+  refused(edited([](json& d) { d["meshes"][0]["primitives"][0]["mode"] = 5; }),
+          absl::StatusCode::kUnimplemented, "GLB primitive is not a triangle list");
+  const size_t indices = glb.document["meshes"][0]["primitives"][0]["indices"].get<size_t>();
+  refused(edited([&](json& d) {
+            d["accessors"][indices]["count"] = 3 * mesh.triangle_count() - 3 + 1;
+          }),
+          absl::StatusCode::kInvalidArgument,
+          "GLB primitive lacks consistent accessors or buffer view");
+  const size_t position =
+      glb.document["meshes"][0]["primitives"][0]["attributes"]["POSITION"].get<size_t>();
+  refused(
+      edited([&](json& d) { d["accessors"][position]["count"] = 3 * mesh.triangle_count() + 1; }),
+      absl::StatusCode::kInvalidArgument, "GLB accessor counts are implausible");
+  refused(edited([&](json& d) { d["bufferViews"][0]["byteLength"] = glb.bin.size() + 4; }),
+          absl::StatusCode::kInvalidArgument, "Draco buffer view lies outside the BIN chunk");
+  // The second chunk is the buffer only if it says it is BIN.
+  refused(Container(glb.document, glb.bin, true, 0x5A5A5A5A), absl::StatusCode::kInvalidArgument,
+          "Draco buffer view lies outside the BIN chunk");
+
+  // The container: chunks are 4-byte aligned, and the header's length is the file's.
+  json odd = glb.document;
+  odd["asset"]["generator"] = "isostream";
+  std::string text = odd.dump();
+  if (text.size() % 4 == 0) odd["asset"]["generator"] = "isostream!";
+  text = odd.dump();
+  ASSERT_NE(text.size() % 4, 0u);
+  refused(Container(odd, glb.bin, /*pad=*/false), absl::StatusCode::kInvalidArgument,
+          "GLB chunk 0 has bad length " + std::to_string(text.size()));
+  const std::string whole = Container(glb.document, glb.bin);
+  std::string longer = whole + std::string(8, '\0');  // an empty chunk the header does not count
+  refused(longer, absl::StatusCode::kInvalidArgument,
+          "GLB header declares " + std::to_string(whole.size()) + " bytes; file has " +
+              std::to_string(longer.size()));
+}
+
+// The spec pads the JSON chunk with spaces: a JSON parser stricter than ours stops at a NUL.
+TEST(MeshGlb, TheJsonChunkIsPaddedWithSpaces) {
+  int padded = 0;
+  for (int n = 1; n <= 6; ++n) {
+    const absl::StatusOr<GlbChunks> chunks = ParseGlbChunks(Serialize(MakeGrid(n), GlbOptions{}));
+    ASSERT_TRUE(chunks.ok()) << chunks.status();
+    const size_t end = chunks->json.find_last_of('}');
+    ASSERT_NE(end, std::string::npos);
+    padded += end + 1 < chunks->json.size();
+    EXPECT_EQ(chunks->json.substr(end + 1), std::string(chunks->json.size() - end - 1, ' ')) << n;
+  }
+  EXPECT_GT(padded, 0);  // some of them needed padding
+}
+
+// A mesh that cannot be written is refused naming the file it was for.
+TEST(MeshGlb, ARefusedWriteNamesTheFile) {
+  ScratchDir dir;
+  OrderedMesh bad = MakeGrid(2);
+  bad.surface[1] = kMaxSurfaces;
+  const std::string path = dir.File("named.glb");
+  const absl::Status s = WriteGlb(bad, path);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(s.message()).rfind(path + ": ", 0), 0u) << s;
 }
 
 }  // namespace
