@@ -61,7 +61,9 @@ TEST(VolumeLoadErrors, WrongMagic) {
   nf.magic = "ni1";
   path = ScratchPath("pair.nii");
   WriteBytes(path, nf.Header());
-  ExpectError(LoadVolume(path), absl::StatusCode::kInvalidArgument, "pair.nii");
+  ExpectError(
+      LoadVolume(path), absl::StatusCode::kInvalidArgument, "pair.nii",
+      "NIfTI-1 header/image pair (.hdr/.img) is not supported; convert to a single .nii file");
 
   path = ScratchPath("garbage.vdb");
   WriteBytes(path, std::vector<unsigned char>(200, 0x42));
@@ -258,6 +260,26 @@ TEST(VolumeLoadErrors, GridsTheWalkDoesNotVouchFor) {
               "several grids written without grid offsets");
 }
 
+// A file of no grids is named as empty; one without a float grid lists what it holds, the
+// first eight grids of them.
+TEST(VolumeLoadErrors, WhatAFileWithoutAFloatGridHolds) {
+  ExpectError(LoadVolume(WriteVdb("no_grids.vdb", {})), absl::StatusCode::kDataLoss, "no_grids.vdb",
+              "holds no grids (an empty or truncated file)");
+  openvdb::GridPtrVec ints;
+  for (int i = 0; i < 9; ++i) {
+    auto g = openvdb::Int32Grid::create(0);
+    g->setName("g" + std::to_string(i));
+    g->tree().setValue(openvdb::Coord(i), 1);
+    ints.push_back(g);
+  }
+  const absl::StatusOr<VolumePtr> v = LoadVolume(WriteVdb("nine_ints.vdb", ints));
+  ExpectError(v, absl::StatusCode::kInvalidArgument, "nine_ints.vdb",
+              ": no float grid; it holds 'g0' (Tree_int32_5_4_3), 'g1' (Tree_int32_5_4_3)");
+  const std::string message(v.status().message());
+  EXPECT_NE(message.find("'g7' (Tree_int32_5_4_3), ..."), std::string::npos) << message;
+  EXPECT_EQ(message.find("'g8'"), std::string::npos) << message;
+}
+
 TEST(VolumeLoadErrors, TruncatedData) {
   NiftiFile nf;
   const auto full = Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false));
@@ -361,6 +383,14 @@ TEST(VolumeLoadErrors, DimsBelowTwo) {
   const std::string series = ScratchPath("series.nii");
   WriteBytes(series, Concat(nf.Header(), Samples(Type::kFloat32, {5, 4, 6}, false)));
   ExpectError(LoadVolume(series), absl::StatusCode::kInvalidArgument, "series.nii", "3D");
+
+  // A 2D image is not a volume, whatever its header holds past its two dimensions.
+  nf = NiftiFile();
+  nf.dim0 = 2;
+  const std::string image = ScratchPath("image.nii");
+  WriteBytes(image, Concat(nf.Header(), Samples(Type::kFloat32, nf.dims, false)));
+  ExpectError(LoadVolume(image), absl::StatusCode::kInvalidArgument, "image.nii",
+              "not a 3D volume (dim = 2, 5, 4)");
 }
 
 TEST(VolumeLoadErrors, DimsAboveLimits) {
@@ -462,6 +492,15 @@ TEST(VolumeLoadErrors, UnsupportedTypes) {
   const std::string rotated_path = WriteVdb("rotated.vdb", {rotated});
   ExpectError(LoadVolume(rotated_path), absl::StatusCode::kInvalidArgument, "rotated.vdb",
               "axis-aligned");
+  // However little: half a degree is not axis-aligned either.
+  auto tilted = openvdb::FloatGrid::create(0.0f);
+  tilted->tree().setValue(openvdb::Coord(1, 2, 3), 1.0f);
+  tilted->tree().setValue(openvdb::Coord(2, 3, 4), 2.0f);
+  tilted->transform().preRotate(0.5 * M_PI / 180, openvdb::math::Z_AXIS);
+  ExpectError(LoadVolume(WriteVdb("tilted.vdb", {tilted})), absl::StatusCode::kInvalidArgument,
+              "tilted.vdb",
+              "only axis-aligned transforms are supported (this one is rotated 0.5 degrees off "
+              "the axes)");
 }
 
 TEST(VolumeLoadErrors, NonFiniteSamples) {
@@ -552,6 +591,27 @@ TEST(VolumeLoadErrors, NonFiniteSamples) {
   const std::string inf_vdb = WriteVdb("inf.vdb", {grid});
   ExpectError(LoadVolume(inf_vdb), absl::StatusCode::kInvalidArgument, "inf.vdb",
               "Inf sample at index (7, 5, 5)");
+}
+
+// A sample of the box outside every leaf is the tile's or the background's value: a value that
+// is not finite there is refused as one in a leaf is.
+TEST(VolumeLoadErrors, NonFiniteValuesOutsideTheLeaves) {
+  // Two leaf-sized constant regions (tiles, no leaves), x 8..15 between them the background's.
+  auto tiles = [](float background) {
+    auto grid = openvdb::FloatGrid::create(background);
+    grid->tree().fill(openvdb::CoordBBox({0, 0, 0}, {7, 7, 7}), 1.0f);
+    grid->tree().fill(openvdb::CoordBBox({16, 0, 0}, {23, 7, 7}), 2.0f);
+    return grid;
+  };
+  ExpectError(LoadVolume(WriteVdb("inf_background.vdb", {tiles(INFINITY)})),
+              absl::StatusCode::kInvalidArgument, "inf_background.vdb",
+              "Inf sample at index (8, 0, 0)");
+  // A finite one there is a sample like any other, in the volume's range too.
+  const absl::StatusOr<VolumePtr> v = LoadVolume(WriteVdb("finite_background.vdb", {tiles(7.0f)}));
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->dims, (std::array<int, 3>{24, 8, 8}));
+  EXPECT_EQ((*v)->min_value, 1.0f);
+  EXPECT_EQ((*v)->max_value, 7.0f);
 }
 
 TEST(VolumeLoadErrors, BadGeneratorSpecs) {

@@ -99,6 +99,7 @@ TEST(VolumeLoadNifti, VoxOffsetBelow352ReadsFrom352) {
     absl::StatusOr<VolumePtr> v = LoadVolume(path);
     ASSERT_TRUE(v.ok()) << v.status();
     ExpectSamples(**v, [](int64_t i) { return float(StoredValue(Type::kFloat32, i)); });
+    EXPECT_EQ((*v)->grid->getName(), "vox_offset.nii");  // the file's name, not its path
   }
   std::vector<unsigned char> bytes = file;
   PutAt<float>(bytes, 108, -4.0f, false);
@@ -108,6 +109,19 @@ TEST(VolumeLoadNifti, VoxOffsetBelow352ReadsFrom352) {
   ASSERT_FALSE(v.ok());
   EXPECT_NE(v.status().message().find("vox_offset -4 is not a byte offset"), std::string::npos)
       << v.status();
+  // One that is not a number is no offset either (taken as one, the read began past any file),
+  // and one past any file this loader reads is said to be so.
+  for (const auto& [given, why] : {std::pair{NAN, " is not a byte offset"},
+                                   std::pair{2e9f, " is past any file this loader reads"}}) {
+    bytes = file;
+    PutAt<float>(bytes, 108, given, false);
+    WriteBytes(path, bytes);
+    v = LoadVolume(path);
+    ASSERT_FALSE(v.ok()) << given;
+    EXPECT_EQ(v.status().code(), absl::StatusCode::kInvalidArgument) << v.status();
+    EXPECT_NE(v.status().message().find(why), std::string::npos) << v.status();
+    EXPECT_NE(v.status().message().find(path + ": vox_offset "), std::string::npos) << v.status();
+  }
 }
 
 // Scaling that cannot give numbers is a damaged header (it applied the slope and took a NaN

@@ -90,6 +90,19 @@ TEST(VolumeOrientation, QformQuarterTurnAndQfac) {
   ExpectPlaced(vol, nf.dims, m, {-5, 6, 7}, 1e-5);
 }
 
+// A half turn whose quaternion's float rounding leaves it just inside the unit sphere (a^2 of
+// ~5e-8) is the half turn: normalised, not read as a turn a few hundredths of a degree off it.
+TEST(VolumeOrientation, QformHalfTurnRoundedInsideTheUnitSphere) {
+  NiftiFile nf;
+  nf.qform_code = 1;
+  const float h = float(std::sqrt(0.5));
+  nf.quatern = {h, h, 0};  // about x + y: x and y swap, z reverses
+  absl::StatusOr<VolumePtr> v = WriteAndLoad(nf, "qform_half_turn.nii");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->orientation, "file axes i j k on world +y +x -z");
+  EXPECT_EQ((*v)->dims, (std::array<int, 3>{4, 5, 3}));
+}
+
 // A grid rotated 10 degrees about z keeps its samples on the nearest axes, and says so.
 TEST(VolumeOrientation, ObliqueGridTakesTheNearestAxesAndSaysSo) {
   NiftiFile nf;
@@ -300,6 +313,9 @@ TEST(VolumeOrientation, DamagedFieldsFallThrough) {
   ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ((*v)->spacing, (std::array<double, 3>{2, 2, 2}));
   EXPECT_EQ((*v)->origin, (std::array<double, 3>{100, 200, 300}));  // the qform's offset stands
+  EXPECT_EQ((*v)->orientation,
+            "the qform is unusable (its quaternion is not finite); placed by pixdim's steps at "
+            "the header's offset");
 
   nf = NiftiFile();
   nf.sform_code = 1;
