@@ -3,9 +3,11 @@
 // are in frame_producer_test.cpp).
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <mutex>
 #include <thread>
 
@@ -245,6 +247,58 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
       << missing;
 }
 
+// Every setting written is the one used (one the parser skipped kept its default unsaid), and the
+// bounds are those the messages give, both ends included.
+TEST(Config, EachSettingIsReadAndBoundedAsItsMessageSays) {
+  auto message = [](const std::string& text) {
+    DaemonConfig c;
+    const absl::Status s = LoadText(text, &c);
+    return std::string(s.ok() ? ValidateConfig(c).message() : s.message());
+  };
+  DaemonConfig c;
+  ASSERT_TRUE(LoadText(R"({"cache_max_mb": 512,
+                           "frames": {"max_queued_chunks": 4, "coarse_triangles": 5000}})",
+                       &c)
+                  .ok());
+  EXPECT_EQ(c.cache_max_mb, 512);
+  EXPECT_EQ(c.max_queued_chunks, 4);
+  EXPECT_EQ(c.coarse_triangles, 5000);
+  // An integer setting takes its type's whole range, and nothing past either end (a negative
+  // number past int, as an integer or a float, wrapped or converted to INT_MIN).
+  ASSERT_TRUE(LoadText(R"({"limits": {"max_triangles": 9223372036854775807}})", &c).ok());
+  EXPECT_EQ(c.limits.max_triangles, std::numeric_limits<int64_t>::max());
+  for (const char* threads : {"-3000000000", "-3e9"})
+    EXPECT_NE(message(std::string(R"({"threads": )") + threads + "}")
+                  .find("'threads' must be a whole number in -2147483648..2147483647"),
+              std::string::npos)
+        << threads << ": " << message(std::string(R"({"threads": )") + threads + "}");
+  EXPECT_EQ(message(R"({"limits": {"max_dim": 1025}})"), "");
+  EXPECT_EQ(message(R"({"limits": {"max_dim": 1026}})"), "max_dim (--max-dim) must be in 2..1025");
+  EXPECT_EQ(message(R"({"frames": {"max_queued_chunks": 2}})"), "");
+  EXPECT_EQ(message(R"({"frames": {"max_queued_chunks": 1}})"),
+            "max_queued_chunks must be in 2..256");
+  EXPECT_EQ(message(R"({"frames": {"coarse_triangles": 100}})"), "");
+  EXPECT_EQ(message(R"({"frames": {"coarse_triangles": 99}})"),
+            "coarse_triangles must be at least 100");
+  // DEL is a control character too: gRPC refuses it in a header value.
+  EXPECT_EQ(message(R"({"token": "ab\u007fcd"})"),
+            "token must be printable ASCII (no control or non-ASCII characters)");
+  EXPECT_EQ(message(R"({"volumes": {"": "sphere:9"}})"),
+            "catalogue names and specs must not be empty");
+  // A key in a nested object is its object's: a key of the same name outside it is no repeat.
+  EXPECT_EQ(message(R"({"volumes": {"threads": "sphere:9"}, "threads": 2})"), "");
+  EXPECT_EQ(message(R"({"limits": {"max_dim": 65}, "volumes": {"max_dim": "sphere:9"}})"), "");
+  // Of several repeated keys, the first is named.
+  EXPECT_NE(message(R"({"threads": 1, "listen": "a:1", "threads": 2, "listen": "b:2"})")
+                .find(": key 'threads' is given twice"),
+            std::string::npos)
+      << message(R"({"threads": 1, "listen": "a:1", "threads": 2, "listen": "b:2"})");
+  // A nested key is named with its object's.
+  EXPECT_NE(message(R"({"tls": {"cert": "c.pem", "kee": "k.pem"}})").find("unknown key 'tls.kee'"),
+            std::string::npos)
+      << message(R"({"tls": {"cert": "c.pem", "kee": "k.pem"}})");
+}
+
 // The example deploy/ ships names every key with a valid value.
 TEST(Config, ExampleConfigLoadsAndValidates) {
   DaemonConfig c;
@@ -283,6 +337,28 @@ TEST(Catalogue, GeneratorNamesOnlyWithinTheLimit) {
   const std::string many(VolumeCatalogue(o).Check("x").message());
   EXPECT_NE(many.find("'head', 'v10', "), std::string::npos) << many;
   EXPECT_NE(many.find("'v18' and 3 more"), std::string::npos) << many;
+}
+
+// What an unknown name is answered with: no name at all is said to be none; a long name is
+// quoted shortened (a status past gRPC's metadata limit reached the client as
+// RESOURCE_EXHAUSTED); a list of exactly ten names is the whole list.
+TEST(Catalogue, UnknownNamesAreQuotedWithinBounds) {
+  CatalogueOptions o;
+  const absl::Status none = VolumeCatalogue(o).Check("");
+  EXPECT_EQ(none.code(), absl::StatusCode::kInvalidArgument) << none;
+  EXPECT_EQ(none.message(), "no volume named");
+  for (int i = 0; i < 10; ++i) o.volumes["v" + std::to_string(10 + i)] = "sphere:9";
+  VolumeCatalogue named(o);
+  EXPECT_EQ(named.Check("").message(), "no volume named");
+  const std::string list =
+      "'v10', 'v11', 'v12', 'v13', 'v14', 'v15', 'v16', 'v17', 'v18', 'v19' (ListVolumes lists "
+      "them)";
+  EXPECT_EQ(named.Check("x").message(), "unknown volume 'x'; the catalogue has " + list);
+  const std::string hundred(100, 'h');
+  EXPECT_EQ(named.Check(hundred).message(),
+            "unknown volume '" + hundred + "'; the catalogue has " + list);
+  EXPECT_EQ(named.Check(hundred + "xyz").message(),
+            "unknown volume '" + hundred + "...' (103 bytes); the catalogue has " + list);
 }
 
 TEST(Catalogue, KeepsABoundedNumberOfGeneratorVolumes) {
@@ -364,6 +440,63 @@ TEST(Catalogue, RefusesAGeneratorVolumeThatOthersBeingPreparedLeaveNoRoomFor) {
   b.join();
   EXPECT_TRUE(catalogue.Get("noise:33").ok());  // drops the least recently used now
   EXPECT_EQ(catalogue.held_count(), 2);
+}
+
+// A generated volume that failed to prepare holds nothing: not its bytes, not its name (asked
+// again, it is tried again at once; a catalogue file's failure is remembered, a generator's is
+// the request's).
+TEST(Catalogue, AGeneratedVolumeThatFailedHoldsNothing) {
+  CatalogueOptions o;
+  o.limits.max_voxels = 1000;  // the name passes the check; preparing it does not
+  VolumeCatalogue catalogue(o);
+  auto failed = catalogue.Get("sphere:33");
+  ASSERT_FALSE(failed.ok());
+  EXPECT_EQ(failed.status().code(), absl::StatusCode::kResourceExhausted) << failed.status();
+  EXPECT_EQ(catalogue.held_count(), 0);
+  EXPECT_FALSE(catalogue.Get("sphere:33").ok());
+  EXPECT_EQ(catalogue.held_count(), 0);
+}
+
+// A preparation is charged its samples, 6 bytes a stored point (the floats and half as much
+// again), beside the stores: two 33^3 volumes (384,000 bytes of store and 215,622 of samples
+// each) do not prepare together within 1,100,000 bytes, and the second waits for the first.
+TEST(Catalogue, PreparationsWhoseSamplesDoNotFitBesideTheStoresWait) {
+  CatalogueOptions o;
+  o.max_generator_bytes = 1'100'000;
+  o.prepare_delay = std::chrono::milliseconds(500);
+  VolumeCatalogue catalogue(o);
+  const auto start = std::chrono::steady_clock::now();
+  std::thread a([&] { EXPECT_TRUE(catalogue.Get("sphere:33").ok()); });
+  std::thread b([&] { EXPECT_TRUE(catalogue.Get("cayley:33").ok()); });
+  a.join();
+  b.join();
+  EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(1000));
+  EXPECT_EQ(catalogue.held_count(), 2);
+}
+
+// A preparation that has started runs to its end though its only client gave up: the next
+// request for the volume waits for it rather than starting a second build.
+TEST(Catalogue, AStartedPreparationOutlivesTheClientThatGaveUp) {
+  CatalogueOptions o;
+  o.prepare_delay = std::chrono::milliseconds(800);
+  VolumeCatalogue catalogue(o);
+  // The client gives up once the preparation has left the queue (started), however long a busy
+  // machine took to start it: the cancel check runs under the catalogue's lock, so another
+  // thread watches.
+  std::atomic<bool> started{false};
+  std::thread watcher([&] {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (std::chrono::steady_clock::now() < until &&
+           !(catalogue.held_count() == 1 && catalogue.queued_preparations() == 0))
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    started = true;
+  });
+  auto given_up = catalogue.Get("sphere:17", [&] { return started.load(); });
+  watcher.join();
+  EXPECT_EQ(given_up.status().code(), absl::StatusCode::kCancelled) << given_up.status();
+  EXPECT_EQ(catalogue.held_count(), 1);  // still being prepared
+  ASSERT_TRUE(catalogue.Get("sphere:17").ok());
+  EXPECT_EQ(catalogue.prepared_count(), 1);
 }
 
 // Views given up while their volumes wait behind long preparations leave nothing queued: each
