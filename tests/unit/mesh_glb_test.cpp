@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -56,6 +57,27 @@ ParsedGlb Parse(const std::string& bytes) {
   ParsedGlb parsed{json::parse(chunks->json, nullptr, false), chunks->bin};
   EXPECT_FALSE(parsed.document.is_discarded());
   return parsed;
+}
+
+// The mesh the primitive's Draco extension holds, decoded by Draco itself; its attributes are
+// looked up by the unique ids the extension names.
+struct DecodedPrimitive {
+  std::unique_ptr<draco::Mesh> mesh;
+  const draco::PointAttribute* Attribute(const ParsedGlb& glb, const char* name) const {
+    const json& extension = glb.document["meshes"][0]["primitives"][0]["extensions"][kDraco];
+    return mesh->GetAttributeByUniqueId(extension["attributes"][name].get<uint32_t>());
+  }
+};
+DecodedPrimitive Decode(const ParsedGlb& glb) {
+  const json& extension = glb.document["meshes"][0]["primitives"][0]["extensions"][kDraco];
+  const json& view = glb.document["bufferViews"][extension["bufferView"].get<size_t>()];
+  draco::DecoderBuffer buffer;
+  buffer.Init(glb.bin.data() + view.value("byteOffset", size_t{0}),
+              view["byteLength"].get<size_t>());
+  draco::Decoder decoder;
+  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
+  EXPECT_TRUE(decoded.ok()) << decoded.status().error_msg();
+  return {decoded.ok() ? std::move(decoded).value() : nullptr};
 }
 
 std::string Serialize(const OrderedMesh& mesh, const GlbOptions& options) {
@@ -139,23 +161,12 @@ TEST(MeshGlb, AttributeIdsColoursAndBoundsMatchTheDracoData) {
   const GlbOptions options = ColouredOptions();
   const ParsedGlb glb = Parse(Serialize(mesh, options));
   const json& primitive = glb.document["meshes"][0]["primitives"][0];
-  const json& extension = primitive["extensions"][kDraco];
-  const json& view = glb.document["bufferViews"][extension["bufferView"].get<size_t>()];
-
-  // Decode with Draco directly and look attributes up by the unique ids the extension names.
-  draco::DecoderBuffer buffer;
-  buffer.Init(glb.bin.data() + view.value("byteOffset", size_t{0}),
-              view["byteLength"].get<size_t>());
-  draco::Decoder decoder;
-  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
-  ASSERT_TRUE(decoded.ok()) << decoded.status().error_msg();
-  const draco::Mesh& draco_mesh = *decoded.value();
-  auto attribute = [&](const char* name) {
-    return draco_mesh.GetAttributeByUniqueId(extension["attributes"][name].get<uint32_t>());
-  };
-  const draco::PointAttribute* surface = attribute("_SURFACE");
-  const draco::PointAttribute* color = attribute("COLOR_0");
-  const draco::PointAttribute* position = attribute("POSITION");
+  const DecodedPrimitive decoded = Decode(glb);
+  ASSERT_NE(decoded.mesh, nullptr);
+  const draco::Mesh& draco_mesh = *decoded.mesh;
+  const draco::PointAttribute* surface = decoded.Attribute(glb, "_SURFACE");
+  const draco::PointAttribute* color = decoded.Attribute(glb, "COLOR_0");
+  const draco::PointAttribute* position = decoded.Attribute(glb, "POSITION");
   ASSERT_TRUE(surface && color && position);
   EXPECT_EQ(surface->attribute_type(), draco::GeometryAttribute::GENERIC);
   EXPECT_EQ(color->attribute_type(), draco::GeometryAttribute::COLOR);
@@ -283,18 +294,11 @@ TEST(MeshGlb, ColoursOutsideZeroToOneAreClamped) {
   GlbOptions options;
   options.surface_colors = {{2.0f, -1.0f, NAN, 0.5f}};
   const ParsedGlb glb = Parse(Serialize(MakeGrid(3), options));
-  const json& extension = glb.document["meshes"][0]["primitives"][0]["extensions"][kDraco];
-  const json& view = glb.document["bufferViews"][extension["bufferView"].get<size_t>()];
-  draco::DecoderBuffer buffer;
-  buffer.Init(glb.bin.data() + view.value("byteOffset", size_t{0}),
-              view["byteLength"].get<size_t>());
-  draco::Decoder decoder;
-  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
-  ASSERT_TRUE(decoded.ok()) << decoded.status().error_msg();
-  const draco::PointAttribute* color =
-      decoded.value()->GetAttributeByUniqueId(extension["attributes"]["COLOR_0"].get<uint32_t>());
+  const DecodedPrimitive decoded = Decode(glb);
+  ASSERT_NE(decoded.mesh, nullptr);
+  const draco::PointAttribute* color = decoded.Attribute(glb, "COLOR_0");
   ASSERT_NE(color, nullptr);
-  for (uint32_t p = 0; p < decoded.value()->num_points(); ++p) {
+  for (uint32_t p = 0; p < decoded.mesh->num_points(); ++p) {
     uint8_t rgba[4];
     color->GetMappedValue(draco::PointIndex(p), rgba);
     ASSERT_EQ(rgba[0], 255) << "point " << p;
