@@ -298,12 +298,22 @@ void VolumeCatalogue::Prepare(const std::string& name, const std::shared_ptr<Ent
     volume->prepared = std::move(*prepared);
     QuantizationFor(*volume->prepared.volume, &volume->box, &volume->position_bits);
     volume->position_error = PositionErrorBound(volume->box, volume->position_bits);
+    // What the volume holds, and of which planes (stand-ins for the rest: stored_planes.h).
+    const Hierarchy& hierarchy = *volume->prepared.hierarchy;
+    const std::array<int, 3>& stored = hierarchy.stored_dims();
+    const std::string planes = hierarchy.stored_point_count() < hierarchy.point_count()
+                                   ? std::to_string(stored[0]) + "x" + std::to_string(stored[1]) +
+                                         "x" + std::to_string(stored[2]) + " of the " +
+                                         std::to_string(hierarchy.n()) + "^3 cube's planes"
+                                   : "the whole " + std::to_string(hierarchy.n()) + "^3 cube";
     spdlog::info(
-        "prepared volume '{}': {}x{}x{} in {:.0f} ms (hierarchy cache: {}), {} position bits", name,
-        volume->prepared.volume->dims[0], volume->prepared.volume->dims[1],
+        "prepared volume '{}': {}x{}x{} in {:.0f} ms (hierarchy cache: {}), {} position bits, "
+        "store {} ({})",
+        name, volume->prepared.volume->dims[0], volume->prepared.volume->dims[1],
         volume->prepared.volume->dims[2],
         1e3 * (volume->prepared.load_s + volume->prepared.pad_s + volume->prepared.hierarchy_s),
-        CacheOutcomeName(volume->prepared.cache), volume->position_bits);
+        CacheOutcomeName(volume->prepared.cache), volume->position_bits,
+        MiB(hierarchy.total_bytes()), planes);
     // A cache the daemon cannot write to rebuilds every hierarchy at every start: say so.
     const std::string& note = volume->prepared.cache_note;
     if (note.find("not stored") != std::string::npos)

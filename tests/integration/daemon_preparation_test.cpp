@@ -49,6 +49,8 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
   auto info = ConnectTo(daemon)->GetVolumeInfo("ball");
   ASSERT_TRUE(info.ok()) << info.status();
   EXPECT_NE(DaemonLog(dir).find("prepared volume 'ball'"), std::string::npos);
+  EXPECT_NE(DaemonLog(dir).find("store 3 MiB (the whole 65^3 cube)"), std::string::npos)
+      << DaemonLog(dir);
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
@@ -129,6 +131,7 @@ TEST(CachedDaemon, ServesAThinVolumeFromTheCache) {
     std::ifstream in(log);
     const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     EXPECT_NE(text.find("(hierarchy cache: " + outcome + ")"), std::string::npos) << text;
+    EXPECT_NE(text.find(" of the 513^3 cube's planes)"), std::string::npos) << text;
   }
 }
 
