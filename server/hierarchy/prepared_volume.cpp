@@ -30,7 +30,7 @@ absl::StatusOr<PreparedVolume> PrepareSteps(const std::string& spec, const Volum
   p.load_s = Seconds(t0);
   ISOSTREAM_RETURN_IF_ERROR(StopRequested(build));
   // The loader counted the data's samples; the hierarchy holds the points of the cube's planes it
-  // stores (stored_planes.h: with stand-ins, a 1025x2x2 file of 4 KB holds 1025x44x44 points,
+  // stores (stored_planes.h: with stand-ins, a 1025x2x2 file of 4 KB holds 1025x29x29 points,
   // where the whole cube would take ~13 GB), and that is what max_voxels must bound.
   const int k = HierarchyLevelFor(p.volume->dims);
   const int64_t side = (int64_t{1} << k) + 1;

@@ -70,7 +70,7 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim,
 
 // The planes per axis a generator spec Check has accepted stores: its whole cube's, or, for a
 // side a little past a power of two, its own and stand-ins for the rest of the padding
-// (stored_planes.h: sphere:514 keeps 551 of its 1025^3 cube's planes per axis).
+// (stored_planes.h: sphere:514 keeps 538 of its 1025^3 cube's planes per axis).
 uint64_t GeneratorStoredPlanes(const std::string& spec) {
   const int n = std::stoi(spec.substr(spec.find(':') + 1));  // stops at a noise seed's ':'
   const int k = HierarchyLevelFor({n, n, n});

@@ -17,7 +17,7 @@ struct Limits {
   int64_t deadline_ms = 30'000;  // per frame's extraction; also a client's longest silence
   int max_dim = 257;             // samples per axis of a generator served without a catalogue
   // Memory for the generated volumes held at once (their hierarchy stores: 105 MiB at 257^3,
-  // 6.1 GiB at 1025^3, 962 MiB for sphere:514, which stores stand-ins for most of its 1025^3
+  // 6.1 GiB at 1025^3, 921 MiB for sphere:514, which stores stand-ins for most of its 1025^3
   // cube); catalogue.h says how it is kept.
   int64_t generator_mb = 8192;
   // A Session with no view request and nothing in flight for this long is ended by the server

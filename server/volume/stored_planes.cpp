@@ -24,14 +24,14 @@ AxisPlanes StoredPlanesOf(int k, int data_points) {
   const int64_t data_last = data_points - 1;
   AxisPlanes axis;
   axis.plane_of.assign(std::size_t(last) + 1, -1);
-  std::vector<int> stand_in(std::size_t(k) + 1,
-                            -1);  // by trailing zeros: the coordinate standing in
+  // By trailing zeros: the coordinate standing in for the deep planes with that many.
+  std::vector<int> stand_in(std::size_t(k) + 1, -1);
   for (int c = 0; c <= last; ++c) {
     bool kept = c <= data_last;
     if (!kept) {
       const int v = TrailingZeros(c);
       const int64_t reach = kReach << v;
-      const bool deep = c - reach >= data_last && c + reach <= last;
+      const bool deep = c - reach >= data_last;  // never the far face: 2^k - 4 * 2^k < 0
       if (!deep || stand_in[std::size_t(v)] < 0) {
         kept = true;
         if (deep) stand_in[std::size_t(v)] = c;

@@ -13,14 +13,18 @@
 // scale h - 1 at +-u/2 on every axis. Along one axis a point's descendants and the ends of their
 // refinement edges therefore stay within 3u of it (u for one chain of cube, face and edge
 // centres, then u/2 + u/4 + ... twice). Take coordinate c on an axis with c - 4 * 2^v >= the last
-// data coordinate and c + 4 * 2^v <= 2^k, v = c's trailing zero bits (so u <= 2^v for every
-// point on its plane). Everything eta(p) reads then lies in the padding and inside the cube, none
-// of it clipped at the cube's faces; the refinement edges' directions along that axis are mirror
-// images at most, and the samples do not depend on it; and a child's coordinate c + delta has
-// the same trailing zero bits as c' + delta for another such c' with v trailing zeros, or more
-// than its own scale in both, which is all its eta can depend on. By induction over the scales,
-// eta(p) is the same on every such plane with v trailing zeros: one stored plane per v stands in
-// for them all. Tested point for point against the whole cube (hierarchy_stand_in_test.cpp).
+// data coordinate, v = c's trailing zero bits (so u <= 2^v for every point on its plane; and
+// c < 2^k). Everything eta(p) reads then lies in the padding; the refinement edges' directions
+// along that axis are mirror images at most, and the samples do not depend on it; and a child's
+// coordinate c + delta has the same trailing zero bits as c' + delta for another such c' with v
+// trailing zeros, or more than its own scale in both, which is all its eta can depend on. The
+// cube's far face clips some descendants: an edge centre on it has no children beyond it. But
+// in the padding each such child's mirror image about the face (an even lattice plane of its
+// scale, about which the hierarchy is symmetric, as the samples are about any padded plane) is
+// a child too, with the same eta, so the largest eta is the same with or without it. By
+// induction over the scales, eta(p) is the same on every such plane with v trailing zeros: one
+// stored plane per v stands in for them all. Tested point for point against the whole cube
+// (hierarchy_stand_in_test.cpp, random shapes among them).
 #pragma once
 
 #include <array>
@@ -35,7 +39,7 @@ struct AxisPlanes {
 };
 
 // The planes along an axis of the 2^k + 1 cube holding `data_points` points of data (from
-// coordinate 0): all of the data's, those within reach of the data or of the cube's far face,
+// coordinate 0): all of the data's, those within reach of the data (the far face among them),
 // and one stand-in per number of trailing zero bits for the rest.
 AxisPlanes StoredPlanesOf(int k, int data_points);
 

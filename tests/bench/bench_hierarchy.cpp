@@ -66,7 +66,7 @@ BENCHMARK(BM_BuildHierarchy)
     ->MinTime(2.0);
 
 // A thin volume (a 1000 x 1000 x 60 slab of a smooth field, padded as PadToHierarchyDomain
-// does) held with stand-ins for the planes deep in the padding: 1016 x 1016 x 102 of the 1025^3
+// does) held with stand-ins for the planes deep in the padding: 1012 x 1012 x 87 of the 1025^3
 // cube's planes (stored_planes.h).
 const PaddedSamples& Slab() {
   static const PaddedSamples slab = [] {

@@ -408,8 +408,8 @@ std::string PrepareTwoAtOnce(int generator_mb) {
 // Where `line` first appears in `log` (npos: nowhere), for the two volumes either way round.
 size_t At(const std::string& log, const std::string& line) { return log.find(line); }
 
-// sphere:130 pads to the 257^3 cube but stores 157 planes per axis (stand-ins for the rest):
-// 23 MiB of store and 22 MiB of samples, where the whole cube would be 105 and 97 MiB. It is
+// sphere:130 pads to the 257^3 cube but stores 148 planes per axis (stand-ins for the rest):
+// 20 MiB of store and 19 MiB of samples, where the whole cube would be 105 and 97 MiB. It is
 // charged what it stores (a budget of 60 MiB refused it as needing 105 MiB).
 TEST(GeneratorBudget, AVolumeStoringStandInsIsChargedWhatItStores) {
   ScratchDir dir;

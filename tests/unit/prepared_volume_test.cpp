@@ -42,11 +42,12 @@ TEST(PrepareVolume, KeepsTheFactsAndTheSamplesAndReleasesTheGrid) {
   }
 }
 
-// max_voxels bounds the cube a volume is held in, not only its samples: a 33x2x2 volume of 132
-// samples is a 33^3 cube (it was prepared at any max_voxels its samples fitted).
+// max_voxels bounds the points a volume is held in, not only its samples: a 33x2x2 volume of 132
+// samples pads to a 33^3 cube, of which it stores 33x14x14 planes (stand-ins for the rest of the
+// padding; it was prepared at any max_voxels its samples fitted).
 TEST(PrepareVolume, MaxVoxelsBoundsThePaddedCube) {
   VolumeLimits limits;
-  limits.max_voxels = 20 * 20 * 20;
+  limits.max_voxels = 33 * 14 * 14 - 1;
   const std::string path = ::testing::TempDir() + "/thin_33x2x2.raw";
   {
     std::FILE* f = std::fopen(path.c_str(), "wb");
@@ -58,8 +59,10 @@ TEST(PrepareVolume, MaxVoxelsBoundsThePaddedCube) {
   ASSERT_TRUE(LoadVolume(spec, limits).ok());
   const auto prepared = PrepareVolume(spec, limits, HierarchyCacheOptions{}, {});
   EXPECT_EQ(prepared.status().code(), absl::StatusCode::kResourceExhausted) << prepared.status();
-  EXPECT_NE(prepared.status().message().find("33^3 cube"), std::string::npos) << prepared.status();
-  limits.max_voxels = 33 * 33 * 33;
+  EXPECT_NE(prepared.status().message().find("held as 6468 points of a 33^3 cube"),
+            std::string::npos)
+      << prepared.status();
+  limits.max_voxels = 33 * 14 * 14;
   EXPECT_TRUE(PrepareVolume(spec, limits, HierarchyCacheOptions{}, {}).ok());
 }
 
