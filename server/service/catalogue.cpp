@@ -74,8 +74,8 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim,
 uint64_t GeneratorStoredPlanes(const std::string& spec) {
   const int n = std::stoi(spec.substr(spec.find(':') + 1));  // stops at a noise seed's ':'
   const int k = HierarchyLevelFor({n, n, n});
-  if (!UseStandIns(k, {n, n, n})) return (uint64_t{1} << k) + 1;
-  return StoredPlanesOf(k, n).planes.size();
+  const auto axes = StandInPlanes(k, {n, n, n});
+  return axes ? (*axes)[0].planes.size() : (uint64_t{1} << k) + 1;
 }
 
 // What a generator volume's hierarchy store will take: nearly all a prepared volume holds,

@@ -62,12 +62,12 @@ absl::StatusOr<PaddedSamples> Pad(const Volume& volume, const std::string& where
   out.k = k;
   out.n = (1 << k) + 1;
   out.data_dims = dims;
-  if (planes == CubePlanes::kStandIns && UseStandIns(k, dims))
-    for (int a = 0; a < 3; ++a) {
-      AxisPlanes axis = StoredPlanesOf(k, dims[a]);
-      out.planes[a] = std::move(axis.planes);
-      out.plane_of[a] = std::move(axis.plane_of);
-    }
+  if (planes == CubePlanes::kStandIns)
+    if (auto axes = StandInPlanes(k, dims))
+      for (int a = 0; a < 3; ++a) {
+        out.planes[a] = std::move((*axes)[a].planes);
+        out.plane_of[a] = std::move((*axes)[a].plane_of);
+      }
   // Stored plane indices equal cube coordinates up to the data's last plane on every axis (all
   // of those are stored, first), so the data box sits at the array's origin corner as in the
   // whole cube; sx, sy, sz are the stored extents.

@@ -11,12 +11,6 @@ constexpr int64_t kReach = 4;
 
 int TrailingZeros(int c) { return __builtin_ctz(unsigned(c)); }
 
-int64_t StandInPoints(int k, const std::array<int, 3>& data_dims) {
-  int64_t points = 1;
-  for (int a = 0; a < 3; ++a) points *= int64_t(StoredPlanesOf(k, data_dims[a]).planes.size());
-  return points;
-}
-
 }  // namespace
 
 AxisPlanes StoredPlanesOf(int k, int data_points) {
@@ -49,14 +43,27 @@ AxisPlanes StoredPlanesOf(int k, int data_points) {
   return axis;
 }
 
-bool UseStandIns(int k, const std::array<int, 3>& data_dims) {
+std::optional<std::array<AxisPlanes, 3>> StandInPlanes(int k, const std::array<int, 3>& data_dims) {
+  std::array<AxisPlanes, 3> axes;
+  int64_t points = 1;
+  for (int a = 0; a < 3; ++a) {
+    axes[a] = StoredPlanesOf(k, data_dims[a]);
+    points *= int64_t(axes[a].planes.size());
+  }
   const int64_t side = (int64_t{1} << k) + 1;
-  return 4 * StandInPoints(k, data_dims) <= 3 * side * side * side;
+  if (4 * points > 3 * side * side * side) return std::nullopt;
+  return axes;
 }
 
 int64_t StoredPointCount(int k, const std::array<int, 3>& data_dims) {
-  const int64_t side = (int64_t{1} << k) + 1;
-  return UseStandIns(k, data_dims) ? StandInPoints(k, data_dims) : side * side * side;
+  const auto axes = StandInPlanes(k, data_dims);
+  if (!axes) {
+    const int64_t side = (int64_t{1} << k) + 1;
+    return side * side * side;
+  }
+  int64_t points = 1;
+  for (const AxisPlanes& axis : *axes) points *= int64_t(axis.planes.size());
+  return points;
 }
 
 }  // namespace isostream

@@ -29,6 +29,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 namespace isostream {
@@ -43,15 +44,19 @@ struct AxisPlanes {
 // and one stand-in per number of trailing zero bits for the rest.
 AxisPlanes StoredPlanesOf(int k, int data_points);
 
-// Points stored for a volume of these dimensions in the 2^k + 1 cube: the stored planes' product
-// when stand-ins save at least a quarter of the cube, else the whole cube (UseStandIns).
-int64_t StoredPointCount(int k, const std::array<int, 3>& data_dims);
+// The three axes' stored planes for a volume of these dimensions in the 2^k + 1 cube, where the
+// stand-ins are worth it: they keep at most 3/4 of the cube's points. Empty: the whole cube.
+// The stand-in builder is ~2x slower per point than the whole cube's (tiles of a regular
+// lattice), but a build's time is mostly first touches of its memory: 300x400x500 (53.5% of its
+// 513^3 cube with the planes of the time) prepared in about the same time either way, in 0.81 GB
+// instead of 1.41. Nearer a cube, the whole cube's builder wins.
+std::optional<std::array<AxisPlanes, 3>> StandInPlanes(int k, const std::array<int, 3>& data_dims);
+inline bool UseStandIns(int k, const std::array<int, 3>& data_dims) {
+  return StandInPlanes(k, data_dims).has_value();
+}
 
-// Whether the stand-ins are worth it: they keep at most 3/4 of the cube's points. The
-// stand-in builder is ~2x slower per point than the whole cube's (tiles of a regular lattice),
-// but a build's time is mostly first touches of its memory: 300x400x500 (53.5% of its 513^3
-// cube) prepared in about the same time either way, in 0.81 GB instead of 1.41. Nearer a cube,
-// the whole cube's builder wins.
-bool UseStandIns(int k, const std::array<int, 3>& data_dims);
+// Points stored for a volume of these dimensions in the 2^k + 1 cube: the stand-in planes'
+// product, else the whole cube's.
+int64_t StoredPointCount(int k, const std::array<int, 3>& data_dims);
 
 }  // namespace isostream
