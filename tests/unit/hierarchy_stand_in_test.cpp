@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <random>
 #include <string>
@@ -169,6 +170,28 @@ TEST(HierarchyStandIns, RandomShapesReadTheWholeCubesBits) {
     ASSERT_EQ(p.whole_h->LinearEtaCodes(), p.stand_in_h->LinearEtaCodes()) << Shape(dims);
   }
   EXPECT_GT(compared, 40);
+}
+
+// Stored planes that cannot be a store (not ascending, a map out of range or of the wrong size)
+// are refused, not read out of bounds.
+TEST(HierarchyStandIns, InconsistentPlanesAreRefused) {
+  const VolumePtr v = NoisyVolume({40, 6, 3}, 9);
+  auto good = PadToHierarchyDomain(*v);
+  ASSERT_TRUE(good.ok());
+  ASSERT_FALSE(good->whole_cube());
+  const std::function<void(PaddedSamples*)> damages[] = {
+      [](PaddedSamples* s) { std::swap(s->planes[1][0], s->planes[1][1]); },
+      [](PaddedSamples* s) { s->plane_of[2][5] = int(s->planes[2].size()); },
+      [](PaddedSamples* s) { s->plane_of[0].pop_back(); },
+      [](PaddedSamples* s) { s->planes[2].back() = s->n; },
+      [](PaddedSamples* s) { s->values.resize(s->values.size() - 1); }};
+  for (size_t i = 0; i < std::size(damages); ++i) {
+    PaddedSamples s = *good;
+    damages[i](&s);
+    const auto h = BuildHierarchy(std::move(s));
+    EXPECT_EQ(h.status().code(), absl::StatusCode::kInvalidArgument) << i << ": " << h.status();
+  }
+  EXPECT_TRUE(BuildHierarchy(*good).ok());
 }
 
 TEST(HierarchyStandIns, ExtractsTheWholeCubesMesh) {

@@ -458,6 +458,25 @@ TEST(VolumeLoadErrors, TreesLargerThanTheLimitsNeed) {
   }
 }
 
+// The node budget bounds the active box by max_voxels as well as per axis: a long thin box meets
+// few nodes though its sides are long. With 256 samples per axis and 2,000 in all the budget is
+// ~60 MB (~300 MB by the sides alone): 300 scattered nodes (~90 MB) are refused under it and
+// read when max_voxels allows the whole 256^3 box.
+TEST(VolumeLoadErrors, TheNodeBudgetCountsTheVoxelLimitToo) {
+  auto grid = TestGrid("density", 1.0f);  // active box 10x9x12
+  for (int i = 1; i <= 300; ++i) grid->tree().setValueOff(openvdb::Coord(i * 4096, 0, 0), 0.5f);
+  const std::string path = WriteVdb("scattered300.vdb", {grid});
+  VolumeLimits limits;
+  limits.max_dim = 256;
+  limits.max_voxels = 2000;
+  ExpectError(LoadVolume(path, limits), absl::StatusCode::kResourceExhausted, "scattered300.vdb",
+              "limits of 256 samples per axis and 2000 in all");
+  limits.max_voxels = 256 * 256 * 256;
+  const absl::StatusOr<VolumePtr> v = LoadVolume(path, limits);
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ((*v)->dims, (std::array<int, 3>{10, 9, 12}));
+}
+
 TEST(VolumeLoadErrors, UnsupportedTypes) {
   NiftiFile nf;
   nf.datatype = 32;  // complex64
