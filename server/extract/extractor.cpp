@@ -8,7 +8,6 @@
 #include "server/extract/extractor.h"
 
 #include <tbb/enumerable_thread_specific.h>
-#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -29,6 +28,7 @@
 #include "server/extract/retained_cut.h"
 #include "server/extract/traversal.h"
 #include "server/extract/view_context.h"
+#include "shared/arena_size.h"
 
 namespace isostream {
 
@@ -78,12 +78,6 @@ namespace {
 double Ms(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since)
       .count();
-}
-
-// Threads past the cores' count only contend (and TBB warns on stderr that it ignores them).
-int ArenaSize(int threads) {
-  return threads > 0 ? std::min(threads, tbb::info::default_concurrency())
-                     : int(tbb::task_arena::automatic);
 }
 
 Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequest& r,

@@ -45,7 +45,6 @@
 
 #include <sys/mman.h>
 #include <tbb/blocked_range.h>
-#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -62,6 +61,7 @@
 #include "server/hierarchy/eta_rounding.h"
 #include "server/hierarchy/refinement_vertex.h"
 #include "server/hierarchy/stand_in_build.h"
+#include "shared/arena_size.h"
 
 namespace isostream {
 namespace {
@@ -545,10 +545,7 @@ absl::StatusOr<HierarchyPtr> BuildHierarchy(PaddedSamples samples,
                                             const HierarchyBuildOptions& options) try {
   auto h = std::make_shared<Hierarchy>();
   ISOSTREAM_RETURN_IF_ERROR(h->SetUpStore(samples));
-  // Threads past the cores' count only contend (and TBB warns on stderr that it ignores them).
-  tbb::task_arena arena(options.threads > 0
-                            ? std::min(options.threads, tbb::info::default_concurrency())
-                            : int(tbb::task_arena::automatic));
+  tbb::task_arena arena(ArenaSize(options.threads));
   bool finite = true;
   if (samples.whole_cube()) {
     HierarchyBuilder builder(samples.k, samples.values.data(), h.get());
