@@ -1,7 +1,19 @@
 #!/usr/bin/env bash
 # Installs every Debian 12 package isostream needs to build, test and run.
 # Idempotent: apt-get skips what is already there. Run as root or with sudo available.
+# --tests: also what the tests alone need beyond Debian's packages, the npm packages of
+# tests/interop (independent readers of the .glb output), with Node.js from apt if missing.
 set -euo pipefail
+cd "$(dirname "$0")/.."
+tests=false
+case "${1:-}" in
+  --tests) tests=true ;;
+  "") ;;
+  *)
+    echo "usage: install-deps.sh [--tests]" >&2
+    exit 2
+    ;;
+esac
 
 PACKAGES=(
   build-essential cmake pkg-config ccache git
@@ -32,21 +44,39 @@ PACKAGES=(
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 
+# Node.js runs the interop test's readers. A machine may have it from elsewhere (NodeSource's
+# packages, with their own npm): only a missing one is installed, Debian's.
+if $tests && ! { command -v node && command -v npm; } > /dev/null 2>&1; then
+  PACKAGES+=(nodejs npm)
+fi
+
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PACKAGES[@]} packages present"
-  exit 0
-fi
-if [ -n "$SUDO" ] && ! command -v sudo > /dev/null 2>&1; then
+elif [ -n "$SUDO" ] && ! command -v sudo > /dev/null 2>&1; then
   echo "install-deps: not root and no sudo here: run this script as root, or install:" >&2
   echo "  ${missing[*]}" >&2
   exit 1
+else
+  echo "install-deps: installing ${missing[*]}"
+  # Through env: sudo resets the environment, and a debconf question would wait for an answer.
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get update -q
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends \
+    "${missing[@]}"
 fi
-echo "install-deps: installing ${missing[*]}"
-# Through env: sudo resets the environment, and a debconf question would wait for an answer.
-$SUDO env DEBIAN_FRONTEND=noninteractive apt-get update -q
-$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends \
-  "${missing[@]}"
+
+# The interop test's packages, at the versions package-lock.json pins, into tests/interop (not
+# the system). A stamp of the lock they were installed from skips the registry next time.
+if $tests; then
+  stamp=tests/interop/node_modules/.installed-from-lock
+  if cmp -s tests/interop/package-lock.json "$stamp"; then
+    echo "install-deps: tests/interop's npm packages present"
+  else
+    echo "install-deps: installing tests/interop's npm packages"
+    npm ci --prefix tests/interop --no-audit --no-fund --loglevel=error
+    cp tests/interop/package-lock.json "$stamp"
+  fi
+fi

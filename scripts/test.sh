@@ -2,7 +2,7 @@
 # Sets up a fresh Debian 12 machine, builds, and runs every test (unit and integration).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-./scripts/install-deps.sh
+./scripts/install-deps.sh --tests
 # Tests on, whatever an earlier configure of this build directory chose.
 ./scripts/build.sh -DISOSTREAM_BUILD_TESTS=ON
 cd "${BUILD_DIR:-build}"  # as build.sh
