@@ -7,9 +7,12 @@
 
 namespace isostream {
 
-// The box and bit count for a volume's meshes: bits = the fewest that make the quantization
-// step at most 1/32 of the smallest sample spacing, so the error (half a step) is at most 1/64
-// of a voxel. 129^3 at unit spacing: 13 bits; 513^3: 15 bits.
+// The box and bit count for a volume's meshes: bits = the fewest (8..30) that make the
+// quantization step at most 1/32 of the smallest sample spacing, so its rounding (half a step)
+// is at most 1/64 of a voxel; 0 (float positions, unquantized) where 30 bits cannot. 129^3 at
+// unit spacing: 13 bits; 513^3: 15 bits. Boxes narrower than kNarrowestQuantizedBox (world
+// units) go unquantized too.
+inline constexpr double kNarrowestQuantizedBox = 1e-5;
 void QuantizationFor(const Volume& volume, QuantizationBox* box, int* bits);
 
 }  // namespace isostream
