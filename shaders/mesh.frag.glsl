@@ -2,13 +2,12 @@
 // Two-sided Blinn-Phong with a headlight; the formula is spelled out in
 // client/render/mesh_renderer.h and must stay in step with it.
 
-in vec3 v_position;
+in vec3 v_to_eye;  // in units of the eye's distance to its target
 in vec3 v_normal;
 flat in uint v_surface;
 
 uniform vec4 u_surface_style[16];  // rgb colour, opacity
 
-uniform vec3 u_eye;
 uniform vec3 u_forward;
 uniform bool u_orthographic;
 uniform vec3 u_light;         // unit, world space
@@ -19,10 +18,11 @@ out vec4 frag_color;
 void main() {
   vec4 style = u_surface_style[min(v_surface, 15u)];
 
-  vec3 v = u_orthographic ? -u_forward : normalize(u_eye - v_position);
+  vec3 v = u_orthographic ? -u_forward : normalize(v_to_eye);
   vec3 n = v_normal;
-  // Zero normals mean "undefined" in OrderedMesh; the facet normal keeps such meshes lit.
-  if (dot(n, n) < 1e-12) n = cross(dFdx(v_position), dFdy(v_position));
+  // Zero normals mean "undefined" in OrderedMesh; the facet normal keeps such meshes lit (the
+  // position's derivatives, negated and scaled alike: the same direction).
+  if (dot(n, n) < 1e-12) n = cross(dFdx(v_to_eye), dFdy(v_to_eye));
   n = normalize(n);
   if (dot(n, v) < 0.0) n = -n;
 

@@ -8,13 +8,17 @@ layout(location = 1) in vec3 a_normal;
 layout(location = 2) in uint a_surface;
 
 uniform mat4 u_view_projection;
+uniform vec3 u_eye;
+// 1 / the eye's distance to its target: the vector to the eye in units of the view's own size,
+// so its square neither underflows nor overflows for volumes of any size floats can place.
+uniform float u_view_scale;
 
-out vec3 v_position;
+out vec3 v_to_eye;
 out vec3 v_normal;
 flat out uint v_surface;
 
 void main() {
-  v_position = a_position;
+  v_to_eye = (u_eye - a_position) * u_view_scale;
   v_normal = a_normal;
   v_surface = a_surface;
   gl_Position = u_view_projection * vec4(a_position, 1.0);

@@ -31,8 +31,14 @@ struct Camera {
 
   glm::mat4 ViewMatrix() const;        // world -> eye space, eye at origin looking down -z
   glm::mat4 ProjectionMatrix() const;  // eye space -> clip space, OpenGL depth range [-1, 1]
-  glm::mat4 ViewProjection() const { return ProjectionMatrix() * ViewMatrix(); }
+  glm::mat4 ViewProjection() const;    // world -> clip space
+  glm::dmat4 ViewMatrixInDouble() const;
+  glm::dmat4 ProjectionMatrixInDouble() const;
 };
+
+// |v|, computed in double: the square of a float vector's length underflows below ~1e-19 and
+// overflows above ~1e19, inside the sizes a volume may have.
+float LengthOf(const glm::vec3& v);
 
 // Near and far planes enclosing the sphere of `radius` about a point `distance` from the eye,
 // with a margin (near stays at least 1e-3 of the distance: an eye inside the sphere still

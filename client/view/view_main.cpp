@@ -154,11 +154,11 @@ render::Camera FitToMesh(const render::Camera& unfitted, const OrderedMesh& mesh
     hi = glm::max(hi, p);
   }
   const glm::vec3 center = 0.5f * (lo + hi);
-  const float distance = glm::length(camera.eye - center);
+  const float distance = render::LengthOf(camera.eye - center);
   // At least a millionth of the distance: a frame whose vertices all fall on one point
   // (a single bright voxel's surface, 26 vertices in one place) left near and far equal in
   // single precision, and the frame could not be drawn.
-  const float radius = std::max(0.5f * glm::length(hi - lo), 1e-6f * distance);
+  const float radius = std::max(0.5f * render::LengthOf(hi - lo), 1e-6f * distance);
   if (distance <= radius * 1.05f) return camera;  // eye inside: keep the volume framing
   if (camera.projection == render::Projection::kPerspective) {
     camera.target = center;
@@ -270,18 +270,24 @@ int Run(const Args& args) {
   glm::vec3 direction(0.8f, 0.6f, 1.0f);
   const glm::vec3 center = 0.5f * (lo + hi);
   render::Camera camera = render::FrameBox(lo, hi, direction, base);
+  // Single precision places boxes from ~1e-30 to ~1e30 world units, not all of them viewably.
+  if (args.eye.empty() && !render::IsValidCamera(camera))
+    return Fail(absl::InvalidArgumentError(
+        "the volume's box, from (" + ShortestText(lo.x) + ", " + ShortestText(lo.y) + ", " +
+        ShortestText(lo.z) + ") to (" + ShortestText(hi.x) + ", " + ShortestText(hi.y) + ", " +
+        ShortestText(hi.z) + "), cannot be framed in single precision"));
   if (!args.eye.empty()) {
     auto e = ParseNumbers(args.eye, "--eye");
     if (!e.ok()) return Fail(e.status());
     if (e->size() != 3) return Fail(absl::InvalidArgumentError("--eye needs x,y,z"));
     direction = glm::vec3((*e)[0], (*e)[1], (*e)[2]) - center;
-    if (glm::length(direction) == 0)
+    if (render::LengthOf(direction) == 0)
       return Fail(absl::InvalidArgumentError("--eye is at the volume's centre"));
     // Keep the given eye: aim at the centre, open the field of view to the bounding sphere and
     // put near and far around it (FrameBox's own planes belong to its own eye distance).
     const glm::vec3 eye((*e)[0], (*e)[1], (*e)[2]);
-    const float radius = 0.5f * glm::length(hi - lo);
-    const float distance = glm::length(eye - center);
+    const float radius = 0.5f * render::LengthOf(hi - lo);
+    const float distance = render::LengthOf(eye - center);
     camera = base;
     camera.eye = eye;
     camera.target = center;
@@ -324,7 +330,7 @@ int Run(const Args& args) {
     window.state = state;
     window.camera = camera;
     window.value_range = value_range;
-    window.scene_radius = 0.5f * glm::length(hi - lo);
+    window.scene_radius = 0.5f * render::LengthOf(hi - lo);
     window.exit_after_frames = args.exit_after_frames;
     window.orbit = args.orbit;
     window.timeout_s = args.timeout_s;

@@ -36,7 +36,7 @@ struct Orbit {
     Orbit o;
     o.target = c.target;
     const glm::vec3 d = c.eye - c.target;
-    o.distance = glm::length(d);
+    o.distance = render::LengthOf(d);
     o.yaw = std::atan2(d.x, d.z);
     o.pitch = std::asin(std::clamp(d.y / o.distance, -1.0f, 1.0f));
     return o;

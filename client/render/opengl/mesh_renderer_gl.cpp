@@ -45,6 +45,7 @@ struct Uniforms {
   GLint view_projection = -1;
   GLint surface_style = -1;
   GLint eye = -1;
+  GLint view_scale = -1;
   GLint forward = -1;
   GLint orthographic = -1;
   GLint light = -1;
@@ -252,13 +253,14 @@ absl::StatusOr<std::unique_ptr<MeshRenderer>> MeshRenderer::Create() {
   u.view_projection = glGetUniformLocation(p, "u_view_projection");
   u.surface_style = glGetUniformLocation(p, "u_surface_style");
   u.eye = glGetUniformLocation(p, "u_eye");
+  u.view_scale = glGetUniformLocation(p, "u_view_scale");
   u.forward = glGetUniformLocation(p, "u_forward");
   u.orthographic = glGetUniformLocation(p, "u_orthographic");
   u.light = glGetUniformLocation(p, "u_light");
   u.light_terms = glGetUniformLocation(p, "u_light_terms");
   // Every uniform is used by the shaders; a -1 here means the sources and this file disagree.
-  for (GLint location : {u.view_projection, u.surface_style, u.eye, u.forward, u.orthographic,
-                         u.light, u.light_terms}) {
+  for (GLint location : {u.view_projection, u.surface_style, u.eye, u.view_scale, u.forward,
+                         u.orthographic, u.light, u.light_terms}) {
     if (location < 0) return absl::InternalError("mesh shader lacks a uniform the renderer sets");
   }
   ISOSTREAM_RETURN_IF_ERROR(gl::CheckGl("MeshRenderer::Create"));
@@ -330,6 +332,8 @@ absl::Status MeshRenderer::Render(const Camera& camera) {
   }
   glUniform4fv(m.uniforms.surface_style, kMaxSurfaces, styles);
   glUniform3fv(m.uniforms.eye, 1, glm::value_ptr(camera.eye));
+  glUniform1f(m.uniforms.view_scale,
+              float(1.0 / glm::length(glm::dvec3(camera.target) - glm::dvec3(camera.eye))));
   const glm::vec3 forward = camera.Forward();
   glUniform3fv(m.uniforms.forward, 1, glm::value_ptr(forward));
   glUniform1i(m.uniforms.orthographic, camera.projection == Projection::kOrthographic);
