@@ -239,6 +239,10 @@ absl::Status ValidateConfig(const DaemonConfig& c) {
   for (const char ch : c.token)
     if (ch < 0x20 || ch > 0x7e)
       return bad("token must be printable ASCII (no control or non-ASCII characters)");
+  // A header value loses the spaces around it on its way (and the check skips those after
+  // "Bearer"), so such a token could never be presented: every call would be refused.
+  if (!c.token.empty() && (c.token.front() == ' ' || c.token.back() == ' '))
+    return bad("token must not start or end with a space (no client could present it)");
   // Chunks must stay under gRPC's 4 MiB message limit: a Draco chunk needs at most about 40
   // bytes per triangle (no shared vertices, indices stored plainly); raw chunks are cut at
   // kMaxRawChunkTriangles regardless.

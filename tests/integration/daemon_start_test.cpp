@@ -44,6 +44,7 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
       {"--max-triangles 2.5", "--max-triangles: 2.5 is not a whole number"},
       {"--token ''", "--token is empty"},
       {"--token \"$(printf 'a\\tb')\"", "token must be printable ASCII"},
+      {"--token ' s3cret'", "token must not start or end with a space"},
       {"--bogus", "--bogus"}};
   for (const auto& [flags, reason] : refused) {
     const CommandResult r =

@@ -215,6 +215,11 @@ TEST(Config, RefusesValuesItCouldOnlyMisread) {
   EXPECT_EQ(message(R"({"limits": {"generator_mb": 100}})"), "");
   EXPECT_NE(message("{\"token\": \"caf\u00e9\"}").find("printable ASCII"), std::string::npos);
   EXPECT_EQ(message(R"({"token": "a b"})"), "");
+  // Spaces around a header value do not reach the check: such a token refused every call.
+  EXPECT_EQ(message(R"({"token": " s3cret"})"),
+            "token must not start or end with a space (no client could present it)");
+  EXPECT_NE(message(R"({"token": "s3cret "})").find("must not start or end with a space"),
+            std::string::npos);
   EXPECT_NE(message(R"({"token": ""})").find("'token' is empty"), std::string::npos);
   // Whole numbers written as JSON floats are whole numbers.
   DaemonConfig c;
