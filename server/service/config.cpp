@@ -138,7 +138,7 @@ std::string JsonError(const std::string& path, const std::string& text) {
   try {
     const json parsed = json::parse(text);  // throws where the non-throwing parse failed
     (void)parsed;
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse errors, and numbers past double (1e400)
     why = e.what();
     // "[json.exception.parse_error.101] parse error at ...": the bracketed id means nothing to
     // whoever wrote the file.

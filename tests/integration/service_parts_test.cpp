@@ -154,6 +154,10 @@ TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
             std::string::npos)
       << s;
   EXPECT_EQ(s.message().find("json.exception"), std::string::npos) << s;
+  // A number past double's range is no parse error to the parser, but no less the file's.
+  s = LoadText(R"({"threads": 1e400})", &c);
+  EXPECT_NE(s.message().find("is not valid JSON: number overflow"), std::string::npos) << s;
+  EXPECT_EQ(s.message().find("json.exception"), std::string::npos) << s;
   s = LoadText(R"({"a\u001b[2Jb": 1, "a\u001b[2Jb": 2})", &c);
   EXPECT_NE(s.message().find("key 'a\\x1b[2Jb' is given twice"), std::string::npos) << s;
   EXPECT_EQ(LoadConfigFile("/nonexistent/x.json", &c).code(), absl::StatusCode::kNotFound);
