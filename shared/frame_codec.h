@@ -124,8 +124,9 @@ struct CodecOptions {
   bool compress_connectivity = true;
   // When set, positions are quantized on this fixed grid instead of each chunk's own bounding
   // cube, so a vertex that appears in two chunks of a frame (or in consecutive frames) decodes
-  // to the same value in both and chunk seams cannot crack. Every position encoded must lie
-  // inside the box. Use the volume's bounds.
+  // to the same value in both and chunk seams cannot crack. Every position quantized must lie
+  // inside the box (with position_bits 0 nothing is quantized: the box is not used). Use the
+  // volume's bounds.
   std::optional<QuantizationBox> position_box;
 };
 
@@ -162,10 +163,10 @@ absl::StatusOr<ChunkHeader> ReadChunkHeader(const char* data, size_t size);
 // Encodes triangles [first_triangle, first_triangle + triangle_count) of `mesh` as a Draco
 // chunk (codec 3, or 2 with Connectivity::kDracoSequential), replacing the contents of `out`. The
 // mesh is checked as far as the range reads it (sizes, indices, surface < kMaxSurfaces, finite
-// positions and normals; positions inside options.position_box when set) and options are
-// range-checked; failures return InvalidArgument/OutOfRange and leave `out` unspecified. An empty
-// range gives a valid empty chunk. Costs about 0.1 s per million triangles (codec 3), 0.13-0.15 s
-// (codec 2).
+// positions and normals; positions inside options.position_box when set and quantizing) and
+// options are range-checked; failures return InvalidArgument/OutOfRange and leave `out`
+// unspecified. An empty range gives a valid empty chunk. Costs about 0.1 s per million triangles
+// (codec 3), 0.13-0.15 s (codec 2).
 absl::Status EncodeChunk(const OrderedMesh& mesh, size_t first_triangle, size_t triangle_count,
                          const CodecOptions& options, std::string* out);
 

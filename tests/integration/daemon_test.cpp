@@ -715,6 +715,32 @@ TEST_F(Daemon, RequestBytesThatDoNotParseAreInvalidArgument) {
   EXPECT_TRUE(*health);
 }
 
+// Fetch of a progressive view returns the refined frame, not the coarse one that comes first.
+TEST_F(Daemon, FetchOfAProgressiveViewReturnsTheRefinedFrame) {
+  auto c = Connect();
+  pb::ViewRequest view = MakeView("buckyball:129", 11, 0.002, glm::dvec3(2, -2, 2));
+  bool saw_coarse = false;
+  auto plain = c->Fetch(view);
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  view.set_progressive(true);
+  auto frame = c->Fetch(view, [&](const pb::FrameChunk& ch) { saw_coarse |= ch.coarse(); });
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  ASSERT_TRUE(saw_coarse) << "no coarse frame came: nothing tested";
+  EXPECT_FALSE(frame->coarse);
+  EXPECT_EQ(frame->mesh.triangle_count(), plain->mesh.triangle_count());
+}
+
+// A session closed for sending refuses further views with FAILED_PRECONDITION (a gRPC write
+// after WritesDone is not allowed).
+TEST_F(Daemon, ASessionClosedForSendingRefusesViews) {
+  auto session = Connect()->OpenSession();
+  ASSERT_TRUE(session.ok());
+  ASSERT_TRUE((*session)->CloseSend().ok());
+  EXPECT_EQ((*session)->Send(MakeView("buckyball:65", 1, 0.01, glm::dvec3(2, 2, 2))).code(),
+            absl::StatusCode::kFailedPrecondition);
+  EXPECT_TRUE((*session)->Finish().ok());
+}
+
 TEST_F(Daemon, StillServesAfterEverything) {
   auto c = Connect();
   auto frame = c->Fetch(MakeView("buckyball:65", 99, 0.01, glm::dvec3(-2, 3, 1)));

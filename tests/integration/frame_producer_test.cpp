@@ -304,11 +304,10 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   EXPECT_NE(too_big.message().find("at most 65536"), std::string::npos) << too_big;
 }
 
-// A refused first chunk of a new frame must leave an unfinished frame able to
-// continue with its next chunk (next_chunk_ restored too, not only the mesh).
-TEST(FrameAssembler, ARefusedNewFrameLeavesTheUnfinishedOneResumable) {
+// `n` triangles on vertices of their own (three per triangle), normals +z, surface 0.
+OrderedMesh DisjointTriangles(uint32_t n) {
   OrderedMesh mesh;
-  for (uint32_t t = 0; t < 3; ++t) {
+  for (uint32_t t = 0; t < n; ++t) {
     for (int i = 0; i < 3; ++i) {
       mesh.positions.insert(mesh.positions.end(), {float(t), float(i), 0.0f});
       mesh.normals.insert(mesh.normals.end(), {0.0f, 0.0f, 1.0f});
@@ -316,19 +315,32 @@ TEST(FrameAssembler, ARefusedNewFrameLeavesTheUnfinishedOneResumable) {
     }
     mesh.surface.push_back(0);
   }
-  auto chunk = [&](uint32_t index, bool last) {
-    ::isostream::v1::FrameChunk c;
-    EXPECT_TRUE(EncodeChunkRaw(mesh, index, 1, c.mutable_data()).ok());
-    c.set_frame_id(7);
-    c.set_chunk_index(index);
-    c.set_first_triangle(index);
-    c.set_triangle_count(1);
-    if (last) {
-      c.set_last(true);
-      c.set_chunk_count(index + 1);
-    }
-    return c;
-  };
+  return mesh;
+}
+
+// Chunk `index` of frame `frame_id`: triangle `index` of `mesh`, raw; the last one says the
+// frame has index + 1 chunks.
+::isostream::v1::FrameChunk OneTriangleChunk(const OrderedMesh& mesh, uint64_t frame_id,
+                                             uint32_t index, bool last, bool coarse = false) {
+  ::isostream::v1::FrameChunk c;
+  EXPECT_TRUE(EncodeChunkRaw(mesh, index, 1, c.mutable_data()).ok());
+  c.set_frame_id(frame_id);
+  c.set_coarse(coarse);
+  c.set_chunk_index(index);
+  c.set_first_triangle(index);
+  c.set_triangle_count(1);
+  if (last) {
+    c.set_last(true);
+    c.set_chunk_count(index + 1);
+  }
+  return c;
+}
+
+// A refused first chunk of a new frame must leave an unfinished frame able to
+// continue with its next chunk (next_chunk_ restored too, not only the mesh).
+TEST(FrameAssembler, ARefusedNewFrameLeavesTheUnfinishedOneResumable) {
+  const OrderedMesh mesh = DisjointTriangles(3);
+  auto chunk = [&](uint32_t index, bool last) { return OneTriangleChunk(mesh, 7, index, last); };
   net::FrameAssembler a;
   ASSERT_TRUE(a.Add(chunk(0, false)).ok());
   ASSERT_TRUE(a.Add(chunk(1, false)).ok());
@@ -342,6 +354,84 @@ TEST(FrameAssembler, ARefusedNewFrameLeavesTheUnfinishedOneResumable) {
   EXPECT_TRUE(resumed.ok()) << resumed;
   EXPECT_TRUE(a.complete());
   EXPECT_EQ(a.frame().mesh.triangle_count(), 3u);
+}
+
+// A refined frame's first chunk starts a new frame even while the coarse frame of the same id
+// is unfinished (that frame was superseded), instead of being taken for its next chunk.
+TEST(FrameAssembler, ARefinedChunkStartsANewFrameAfterAnUnfinishedCoarseOne) {
+  const OrderedMesh mesh = DisjointTriangles(2);
+  net::FrameAssembler a;
+  ASSERT_TRUE(a.Add(OneTriangleChunk(mesh, 4, 0, false, /*coarse=*/true)).ok());
+  const absl::Status refined = a.Add(OneTriangleChunk(mesh, 4, 0, false));
+  EXPECT_TRUE(refined.ok()) << refined;
+  EXPECT_FALSE(a.frame().coarse);
+  EXPECT_EQ(a.frame().mesh.triangle_count(), 1u);
+}
+
+// A chunk the codec refuses (here its header's magic) is the server's fault: DATA_LOSS, not
+// the codec's INVALID_ARGUMENT, which would blame the caller.
+TEST(FrameAssembler, AChunkTheCodecRefusesIsDataLoss) {
+  auto chunk = OneTriangleChunk(DisjointTriangles(1), 1, 0, true);
+  (*chunk.mutable_data())[0] = 'X';
+  net::FrameAssembler a;
+  EXPECT_EQ(a.Add(chunk).code(), absl::StatusCode::kDataLoss);
+}
+
+// The frame limit counts triangles; vertices may number up to three per triangle: three
+// triangles on nine vertices fit a limit of three triangles.
+TEST(FrameAssembler, ThreeVerticesPerTriangleFitTheLimit) {
+  const OrderedMesh mesh = DisjointTriangles(3);
+  net::FrameAssembler a(3);
+  for (uint32_t i = 0; i < 3; ++i) {
+    const absl::Status s = a.Add(OneTriangleChunk(mesh, 1, i, i == 2));
+    ASSERT_TRUE(s.ok()) << i << ": " << s;
+  }
+  EXPECT_TRUE(a.complete());
+  EXPECT_EQ(a.frame().mesh.vertex_count(), 9u);
+}
+
+// A chunk refused after decoding (its triangle_count field miscounts its data) takes out all it
+// added: positions, normals, triangles and surfaces alike.
+TEST(FrameAssembler, ARefusedChunkLeavesEveryArrayOfTheFrameAsItWas) {
+  const OrderedMesh mesh = DisjointTriangles(2);
+  net::FrameAssembler a;
+  ASSERT_TRUE(a.Add(OneTriangleChunk(mesh, 1, 0, false)).ok());
+  const OrderedMesh before = a.frame().mesh;
+  auto wrong = OneTriangleChunk(mesh, 1, 1, true);
+  wrong.set_triangle_count(2);
+  EXPECT_EQ(a.Add(wrong).code(), absl::StatusCode::kDataLoss);
+  EXPECT_EQ(a.frame().mesh.positions, before.positions);
+  EXPECT_EQ(a.frame().mesh.normals, before.normals);
+  EXPECT_EQ(a.frame().mesh.triangles, before.triangles);
+  EXPECT_EQ(a.frame().mesh.surface, before.surface);
+}
+
+// The frame counts its chunks, their encoded bytes and each one's first vertex.
+TEST(FrameAssembler, CountsChunksAndBytes) {
+  const OrderedMesh mesh = DisjointTriangles(3);
+  net::FrameAssembler a;
+  int64_t bytes = 0;
+  for (uint32_t i = 0; i < 3; ++i) {
+    const auto chunk = OneTriangleChunk(mesh, 1, i, i == 2);
+    bytes += int64_t(chunk.data().size());
+    ASSERT_TRUE(a.Add(chunk).ok());
+  }
+  EXPECT_EQ(a.frame().chunks, 3);
+  EXPECT_EQ(a.frame().bytes, bytes);
+  EXPECT_EQ(a.frame().chunk_first_vertex, (std::vector<uint32_t>{0, 3, 6}));
+}
+
+// After Take, the next frame starts afresh even under the same id (request ids are the
+// client's: 0 is one).
+TEST(FrameAssembler, AfterTakeAFrameOfTheSameIdStartsAfresh) {
+  const OrderedMesh mesh = DisjointTriangles(2);
+  net::FrameAssembler a;
+  for (int round = 0; round < 2; ++round) {
+    ASSERT_TRUE(a.Add(OneTriangleChunk(mesh, 0, 0, false)).ok()) << round;
+    ASSERT_TRUE(a.Add(OneTriangleChunk(mesh, 0, 1, true)).ok()) << round;
+    ASSERT_TRUE(a.complete());
+    EXPECT_EQ(a.Take().mesh.triangle_count(), 2u);
+  }
 }
 
 // As worker_pool.h promises: ~WorkerPool runs the jobs already queued, then joins.

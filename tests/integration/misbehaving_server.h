@@ -26,6 +26,7 @@ enum class Misbehaviour {
   kFrameThenGone,    // Session answers the view with a whole frame, then ends UNAVAILABLE
   kFrameThenSilent,  // Session and Extract answer with a whole frame, then never end the call
   kOtherFrames,      // Session answers the view with chunks of another frame, paced, without end
+  kWrongFrame,       // Extract answers with a whole frame of another id, then ends OK
 };
 
 class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
@@ -115,12 +116,14 @@ class MisbehavingServer final : public ::isostream::v1::Isostream::Service {
 
   grpc::Status Extract(grpc::ServerContext* context, const ::isostream::v1::ViewRequest* view,
                        grpc::ServerWriter<::isostream::v1::FrameChunk>* writer) override {
-    if (how_ != Misbehaviour::kFrameThenSilent)
+    if (how_ != Misbehaviour::kFrameThenSilent && how_ != Misbehaviour::kWrongFrame)
       return grpc::Status(grpc::StatusCode::UNIMPLEMENTED, "not in this test");
     ::isostream::v1::FrameChunk chunk;
-    if (!WholeFrame(view->request_id(), &chunk))
+    const bool wrong = how_ == Misbehaviour::kWrongFrame;
+    if (!WholeFrame(view->request_id() + (wrong ? 1 : 0), &chunk))
       return grpc::Status(grpc::StatusCode::INTERNAL, "cannot encode the test chunk");
     writer->Write(chunk);
+    if (wrong) return grpc::Status::OK;
     WaitForTheClientToLeave(context);
     return grpc::Status(grpc::StatusCode::CANCELLED, "silent");
   }

@@ -17,6 +17,7 @@
 #include "server/service/frame_producer.h"
 #include "server/service/volume_histogram.h"
 #include "tests/integration/daemon_process.h"
+#include "tests/integration/misbehaving_server.h"
 
 namespace isostream::service {
 namespace {
@@ -120,6 +121,46 @@ TEST(ClientErrors, SayWhetherTheConnectionWasMadeOrLost) {
       absl::DeadlineExceededError("frame took longer than the daemon's deadline of 10000 ms"), o);
   EXPECT_EQ(daemon_late,
             "DEADLINE_EXCEEDED: frame took longer than the daemon's deadline of 10000 ms");
+}
+
+// Fetch against servers that answer Extract badly (tests/integration/misbehaving_server.h).
+absl::StatusOr<net::Frame> FetchFrom(const testing::MisbehavingServer& server) {
+  net::ClientOptions o;
+  o.address = server.address();
+  o.call_timeout = std::chrono::milliseconds(10000);
+  auto c = net::Client::Connect(o);
+  if (!c.ok()) return c.status();
+  ::isostream::v1::ViewRequest view;
+  view.set_volume("sphere:33");
+  view.set_request_id(5);
+  view.add_surfaces()->set_isovalue(0.5f);
+  return (*c)->Fetch(view);
+}
+
+// A whole frame stands when the server never ends the call after it: Fetch cancels the call
+// after its grace and returns the frame (the CANCELLED it caused is not the server's error).
+TEST(ClientFetch, AWholeFrameStandsWhenTheServerNeverEndsTheCall) {
+  testing::MisbehavingServer server(testing::Misbehaviour::kFrameThenSilent);
+  ASSERT_TRUE(server.ok());
+  const auto frame = FetchFrom(server);
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  EXPECT_EQ(frame->mesh.triangle_count(), size_t(testing::MisbehavingServer::kTrianglesPerChunk));
+}
+
+// A frame answering another request is not this request's frame: DATA_LOSS.
+TEST(ClientFetch, AFrameOfAnotherRequestIsDataLoss) {
+  testing::MisbehavingServer server(testing::Misbehaviour::kWrongFrame);
+  ASSERT_TRUE(server.ok());
+  EXPECT_EQ(FetchFrom(server).status().code(), absl::StatusCode::kDataLoss);
+}
+
+// Without --timeout-s (call_timeout 0) gRPC's "Deadline Exceeded" is not this client's timeout:
+// the message must not name a timeout of 0 s.
+TEST(ClientErrors, ADeadlineWithoutATimeoutIsNotBlamedOnTimeoutS) {
+  net::ClientOptions o;
+  o.call_timeout = std::chrono::milliseconds(0);
+  EXPECT_EQ(net::ExplainCallError(absl::DeadlineExceededError("Deadline Exceeded"), o),
+            "DEADLINE_EXCEEDED: Deadline Exceeded");
 }
 
 TEST(Config, ReadsKnownKeysAndNamesBadOnes) {

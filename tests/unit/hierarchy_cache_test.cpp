@@ -45,6 +45,22 @@ class HierarchyCacheTest : public ::testing::Test {
     return *h;
   }
 
+  // With entries for samples 0 (held by the caller) and 1 (released), 0 the older: a cap with
+  // room for two and a third entry stored evict 1, not the held 0.
+  void ExpectTheHeldEntryOutlivesANewerOne() {
+    CacheOutcome outcome;
+    Get(Samples(4, 1), &outcome);  // released at once
+    const std::string a = HierarchyCachePath(cache_.dir, Samples(4, 0));
+    const std::string b = HierarchyCachePath(cache_.dir, Samples(4, 1));
+    const auto now = fs::file_time_type::clock::now();
+    fs::last_write_time(a, now - std::chrono::seconds(20));  // the oldest, but held
+    fs::last_write_time(b, now - std::chrono::seconds(10));
+    cache_.max_bytes = 2 * fs::file_size(a) + fs::file_size(a) / 2;  // room for two entries
+    Get(Samples(4, 2), &outcome);
+    EXPECT_TRUE(fs::exists(a));
+    EXPECT_FALSE(fs::exists(b));
+  }
+
   fs::path dir_;
   HierarchyCacheOptions cache_;
 };
@@ -125,18 +141,10 @@ TEST_F(HierarchyCacheTest, CapEvictsTheLeastRecentlyUsed) {
 TEST_F(HierarchyCacheTest, EntriesStillHeldAreEvictedLast) {
   CacheOutcome outcome;
   HierarchyPtr held = Get(Samples(4, 0), &outcome);
-  Get(Samples(4, 1), &outcome);  // released at once
-  const std::string a = HierarchyCachePath(cache_.dir, Samples(4, 0));
-  const std::string b = HierarchyCachePath(cache_.dir, Samples(4, 1));
-  const auto now = fs::file_time_type::clock::now();
-  fs::last_write_time(a, now - std::chrono::seconds(20));  // the oldest, but held
-  fs::last_write_time(b, now - std::chrono::seconds(10));
-  cache_.max_bytes = 2 * fs::file_size(a) + fs::file_size(a) / 2;  // room for two entries
-  Get(Samples(4, 2), &outcome);
-  EXPECT_TRUE(fs::exists(a));
-  EXPECT_FALSE(fs::exists(b));
+  ExpectTheHeldEntryOutlivesANewerOne();
   held.reset();  // released: the oldest goes first again
-  fs::last_write_time(a, now - std::chrono::seconds(20));
+  const std::string a = HierarchyCachePath(cache_.dir, Samples(4, 0));
+  fs::last_write_time(a, fs::file_time_type::clock::now() - std::chrono::seconds(20));
   Get(Samples(4, 3), &outcome);
   EXPECT_FALSE(fs::exists(a));
   EXPECT_TRUE(fs::exists(HierarchyCachePath(cache_.dir, Samples(4, 2))));
@@ -229,6 +237,84 @@ TEST_F(HierarchyCacheTest, UnwritableDirectoryStillBuilds) {
   auto h = LoadOrBuildHierarchy(Samples(3, 0), cache_, {}, &outcome, &why);
   ASSERT_TRUE(h.ok());
   EXPECT_NE(why.find("cannot"), std::string::npos) << why;
+}
+
+// An entry's name is only where it is looked for: one copied under the name of other samples
+// (same k and size) is stale, not a hit serving the other samples' hierarchy.
+TEST_F(HierarchyCacheTest, AnEntryUnderAnotherSamplesNameIsRebuilt) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);
+  fs::copy_file(HierarchyCachePath(cache_.dir, Samples(4, 0)),
+                HierarchyCachePath(cache_.dir, Samples(4, 1)));
+  const HierarchyPtr h = Get(Samples(4, 1), &outcome);
+  EXPECT_EQ(outcome, CacheOutcome::kInvalidRebuilt);
+  auto fresh = BuildHierarchy(Samples(4, 1));
+  ASSERT_TRUE(fresh.ok());
+  EXPECT_EQ((*fresh)->LinearEta(), h->LinearEta());
+}
+
+// A file whose header is right but for its magic is not an entry.
+TEST_F(HierarchyCacheTest, AnEntryWithAnotherMagicIsRebuilt) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);
+  {
+    std::fstream f(HierarchyCachePath(cache_.dir, Samples(4, 0)),
+                   std::ios::in | std::ios::out | std::ios::binary);
+    f.write("X", 1);
+  }
+  Get(Samples(4, 0), &outcome);
+  EXPECT_EQ(outcome, CacheOutcome::kInvalidRebuilt);
+}
+
+// The cap is "at most max_bytes": entries totalling exactly the cap all stay.
+TEST_F(HierarchyCacheTest, EntriesTotallingExactlyTheCapStay) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);
+  const std::string a = HierarchyCachePath(cache_.dir, Samples(4, 0));
+  cache_.max_bytes = 3 * fs::file_size(a);  // entries of one k have one size
+  Get(Samples(4, 1), &outcome);
+  Get(Samples(4, 2), &outcome);
+  EXPECT_TRUE(fs::exists(a));
+  EXPECT_TRUE(fs::exists(HierarchyCachePath(cache_.dir, Samples(4, 1))));
+  EXPECT_TRUE(fs::exists(HierarchyCachePath(cache_.dir, Samples(4, 2))));
+}
+
+// A write in progress (its writer, process 1, lives) counts towards the cap: with room for one
+// entry, the entry goes and the write stays.
+TEST_F(HierarchyCacheTest, AWriteInProgressCountsTowardsTheCap) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);
+  const std::string a = HierarchyCachePath(cache_.dir, Samples(4, 0));
+  const uintmax_t size = fs::file_size(a);
+  const fs::path live =
+      dir_ /
+      (fs::path(HierarchyCachePath(cache_.dir, Samples(4, 1))).filename().string() + ".tmp.1.0");
+  std::ofstream(live) << std::string(size, 'w');
+  cache_.max_bytes = size + size / 2;
+  TrimHierarchyCache(cache_);
+  EXPECT_FALSE(fs::exists(a));
+  EXPECT_TRUE(fs::exists(live));
+}
+
+// Only files named as entries are evicted: another ".eta" file in the directory stays.
+TEST_F(HierarchyCacheTest, TrimmingLeavesOtherEtaFilesAlone) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);
+  std::ofstream(dir_ / "notes.eta") << "not an entry";
+  cache_.max_bytes = 1;
+  TrimHierarchyCache(cache_);
+  EXPECT_FALSE(fs::exists(HierarchyCachePath(cache_.dir, Samples(4, 0))));
+  EXPECT_TRUE(fs::exists(dir_ / "notes.eta"));
+}
+
+// A hierarchy read from its entry and still held keeps its entry last in the eviction order,
+// as one built and stored does (EntriesStillHeldAreEvictedLast).
+TEST_F(HierarchyCacheTest, AnEntryHeldAfterAHitIsEvictedLast) {
+  CacheOutcome outcome;
+  Get(Samples(4, 0), &outcome);  // built, stored and released at once
+  HierarchyPtr held = Get(Samples(4, 0), &outcome);
+  ASSERT_EQ(outcome, CacheOutcome::kHit);
+  ExpectTheHeldEntryOutlivesANewerOne();
 }
 
 // A hit reads the cached codes straight into the store: it needs no more memory than a build

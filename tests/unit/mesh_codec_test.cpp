@@ -364,7 +364,9 @@ TEST(MeshCodec, NormalErrorBoundHoldsAndIsTight) {
       worst = std::max(worst, std::sqrt(sq));
     }
     EXPECT_LE(worst, NormalErrorBound(bits)) << bits << " bits";
-    EXPECT_GT(worst, 0.2f * NormalErrorBound(bits)) << bits << " bits";
+    // The worst error reaches 0.80-0.83 of the bound at every width: a bound looser by a
+    // third would not be tight.
+    EXPECT_GT(worst, 0.7f * NormalErrorBound(bits)) << bits << " bits";
   }
 }
 

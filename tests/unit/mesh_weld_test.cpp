@@ -67,5 +67,13 @@ TEST(MeshWeld, ThreePartsShareOneVertex) {
   EXPECT_EQ(m.triangles, (std::vector<uint32_t>{0, 1, 2, 0, 3, 4, 0, 5, 6}));
 }
 
+// Normals move with their vertices: the kept vertices' normals, in the same order, and no more.
+TEST(MeshWeld, NormalsFollowTheKeptVertices) {
+  OrderedMesh m = Mesh({0, 1, 2, 2, 1, 5}, {0, 1, 2, 3, 4, 5});
+  m.normals[3 * 5 + 2] = -1.0f;  // vertex 5, kept as vertex 3
+  EXPECT_EQ(WeldIdenticalVertices(&m, {0, 3}), 2u);
+  EXPECT_EQ(m.normals, (std::vector<float>{0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, -1}));
+}
+
 }  // namespace
 }  // namespace isostream
