@@ -116,6 +116,34 @@ TEST(CameraTest, FrameBoxKeepsEveryCornerInView) {
   }
 }
 
+// Volumes may be placed with any spacing from 1e-30 to 1e30: framing and projecting their boxes
+// must not depend on float squares of their lengths (at 1e-16 the view was a speck, past 1e19
+// the eye infinite).
+TEST(CameraTest, FrameBoxKeepsEveryCornerInViewAtAnyScale) {
+  for (const float scale : {1e-30f, 1e-20f, 1e-16f, 1.0f, 1e19f, 1e30f}) {
+    SCOPED_TRACE(scale);
+    const glm::vec3 lo = scale * glm::vec3(-2.0f, 0.5f, 1.0f), hi = scale * glm::vec3(3, 1.5f, 4);
+    for (Projection projection : {Projection::kPerspective, Projection::kOrthographic}) {
+      Camera base;
+      base.projection = projection;
+      const Camera c = FrameBox(lo, hi, glm::vec3(0.8f, 0.6f, 1.0f), base);
+      ASSERT_TRUE(IsValidCamera(c));
+      const double size = glm::length(glm::dvec3(hi - lo));
+      EXPECT_NEAR(glm::length(glm::dvec3(c.eye - c.target)) / size, 1.0, 1.0);  // about its size
+      float widest = 0.0f;
+      for (int k = 0; k < 8; ++k) {
+        const glm::vec3 corner(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z);
+        const glm::vec3 ndc = Project(c, corner);
+        EXPECT_LE(std::abs(ndc.x), 1.0f);
+        EXPECT_LE(std::abs(ndc.y), 1.0f);
+        EXPECT_LE(std::abs(ndc.z), 1.0f);
+        widest = std::max({widest, std::abs(ndc.x), std::abs(ndc.y)});
+      }
+      EXPECT_GT(widest, 0.3f);  // framed, not a speck
+    }
+  }
+}
+
 TEST(CameraTest, OrbitKeepsDistanceAndHeightAndTurnsEvenly) {
   Camera base;
   base.eye = {3.0f, 1.0f, 0.0f};
