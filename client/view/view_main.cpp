@@ -434,8 +434,8 @@ int main(int argc, char** argv) {
           ->check(CLI::Range(1, 1 << 30));
   app.add_option("--timeout-s", args.timeout_s,
                  "headless, or --window with --exit-after: fail after this many seconds without "
-                 "an answer or data from the server, connecting included (default 60; 0: wait "
-                 "forever)")
+                 "an answer or data from the server, connecting included, or (--window) without "
+                 "a move once its frames are in (default 60; 0: wait forever)")
       ->check(CLI::Range(0, 86400));
   try {
     app.parse(argc, argv);

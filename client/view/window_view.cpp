@@ -301,10 +301,18 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       }
     }
     if (!result.ok()) break;
-    if (options.exit_after_frames > 0 && options.timeout_s > 0 && awaiting_frame &&
+    // A script's window (--exit-after) waits at most --timeout-s for data, and as long for a
+    // move once its frames are in: frames after the first come only from moves or --orbit, and
+    // without either it waited for ever.
+    if (options.exit_after_frames > 0 && options.timeout_s > 0 &&
         Clock::now() - last_data > std::chrono::seconds(options.timeout_s)) {
-      result = absl::DeadlineExceededError("no data from the server for " +
-                                           std::to_string(options.timeout_s) + " s");
+      const std::string waited = std::to_string(options.timeout_s) + " s";
+      result = awaiting_frame
+                   ? absl::DeadlineExceededError("no data from the server for " + waited)
+                   : absl::DeadlineExceededError(
+                         "--exit-after " + std::to_string(options.exit_after_frames) + ": " +
+                         std::to_string(refined_frames) + " refined frame(s), then no move for " +
+                         waited + " (frames after the first come from moves, keys or --orbit)");
       break;
     }
     if (connection.open() && inbox.ended && inbox.chunks.empty()) {

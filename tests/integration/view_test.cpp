@@ -309,6 +309,29 @@ TEST(View, WindowOrbitsToItsExitAfterCount) {
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
+// A script's window that asks for more frames than it will ever get (--exit-after 2, no
+// --orbit, nobody at the keys) gives up after --timeout-s without a move, saying so: it waited
+// for ever (found by a helper's walkthrough), and --timeout-s was read only while a frame was
+// on its way.
+TEST(View, WindowWaitingForAMoveGivesUpAfterTheTimeout) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "xvfb-run is not installed (scripts/install-deps.sh installs it)";
+  testing::ScratchDir dir;
+  testing::DaemonProcess daemon;
+  ASSERT_TRUE(daemon.Start({"--no-cache"}, dir.path() + "/daemon.log"));
+  const testing::CommandResult run = testing::RunCommand(
+      "timeout 60 xvfb-run -a -s '-screen 0 640x480x24' " +
+      ::isostream::testing::ShellQuote(ISOSTREAM_VIEW_PATH) + " --server " + daemon.address() +
+      " --volume buckyball:33 --iso 0.15 --eps 0.01 --size 160x120 --window --exit-after 2"
+      " --timeout-s 2 -o " +
+      dir.path() + "/never.png");
+  EXPECT_NE(run.code, 0);
+  EXPECT_NE(run.code, 124) << "still waiting when timeout killed it";
+  EXPECT_NE(run.output.find("1 refined frame(s), then no move for 2 s"), std::string::npos)
+      << run.output;
+  EXPECT_EQ(daemon.Stop(), 0);
+}
+
 // '+' refines a --budget view: the budget doubles (the keys changed only eps, which a budget
 // view never sends, so the same mesh came back, re-ordered).
 TEST(View, WindowPlusDoublesABudget) {
