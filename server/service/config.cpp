@@ -151,6 +151,25 @@ std::string JsonError(const std::string& path, const std::string& text) {
   return "'" + path + "' is not valid JSON" + (why.empty() ? "" : ": " + why);
 }
 
+// A relative path in a config file is the file's: a daemon's working directory is rarely where
+// its config lives (systemd's is /), and "data/ct.nii.gz" failed there at every preparation.
+std::string Beside(const std::filesystem::path& dir, const std::string& path) {
+  if (path.empty() || std::filesystem::path(path).is_absolute()) return path;
+  return (dir / path).string();
+}
+
+// The same for a catalogue spec naming a file (a generator names none): the whole spec for a
+// .vdb (its "#GRID" stays a suffix), NIfTI or raw file, the PATH part of "raw:PATH:...".
+std::string SpecBeside(const std::filesystem::path& dir, const std::string& spec) {
+  const auto parsed = ParseVolumeSpec(spec, VolumeLimits{});
+  if (!parsed.ok() || parsed->source == VolumeSource::kGenerator) return spec;  // checked later
+  if (parsed->source == VolumeSource::kRawFile) {
+    constexpr std::string_view kRaw = "raw:";
+    return std::string(kRaw) + Beside(dir, spec.substr(kRaw.size()));
+  }
+  return Beside(dir, spec);
+}
+
 absl::Status ReadConfigFile(const std::string& path, DaemonConfig* config) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec))
@@ -178,6 +197,13 @@ absl::Status ReadConfigFile(const std::string& path, DaemonConfig* config) {
     return absl::InvalidArgumentError(path + ": key '" + repeated + "' is given twice");
   const absl::Status s = Parse(j, config);
   if (!s.ok()) return absl::InvalidArgumentError(path + ": " + std::string(s.message()));
+  std::error_code failed;
+  const std::filesystem::path whole = std::filesystem::absolute(path, failed);
+  const std::filesystem::path dir = (failed ? std::filesystem::path(path) : whole).parent_path();
+  for (auto& [name, spec] : config->volumes) spec = SpecBeside(dir, spec);
+  config->cache_dir = Beside(dir, config->cache_dir);
+  config->tls_cert = Beside(dir, config->tls_cert);
+  config->tls_key = Beside(dir, config->tls_key);
   return absl::OkStatus();
 }
 

@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
@@ -161,6 +162,29 @@ TEST(ClientErrors, ADeadlineWithoutATimeoutIsNotBlamedOnTimeoutS) {
   o.call_timeout = std::chrono::milliseconds(0);
   EXPECT_EQ(net::ExplainCallError(absl::DeadlineExceededError("Deadline Exceeded"), o),
             "DEADLINE_EXCEEDED: Deadline Exceeded");
+}
+
+// Relative paths in a config file are the file's own: catalogue files (a .vdb's #GRID and a raw
+// spec's layout kept), the cache directory, the TLS files; generators and absolute paths stay.
+TEST(Config, RelativePathsAreTheFilesOwn) {
+  ScratchDir dir;
+  std::filesystem::create_directories(dir.path() + "/etc");
+  const std::string path = dir.path() + "/etc/c.json";
+  std::ofstream(path) << R"({"volumes": {"n": "data/head.nii.gz", "v": "../v.vdb#density",
+                                         "r": "raw:r.raw:4x4x4:float32", "g": "sphere:9",
+                                         "a": "/srv/a.nii"},
+                             "cache_dir": "cache", "tls": {"cert": "c.pem", "key": "/k.pem"}})";
+  DaemonConfig c;
+  ASSERT_TRUE(LoadConfigFile(path, &c).ok());
+  const std::string etc = dir.path() + "/etc/";
+  EXPECT_EQ(c.volumes.at("n"), etc + "data/head.nii.gz");
+  EXPECT_EQ(c.volumes.at("v"), etc + "../v.vdb#density");
+  EXPECT_EQ(c.volumes.at("r"), "raw:" + etc + "r.raw:4x4x4:float32");
+  EXPECT_EQ(c.volumes.at("g"), "sphere:9");
+  EXPECT_EQ(c.volumes.at("a"), "/srv/a.nii");
+  EXPECT_EQ(c.cache_dir, etc + "cache");
+  EXPECT_EQ(c.tls_cert, etc + "c.pem");
+  EXPECT_EQ(c.tls_key, "/k.pem");
 }
 
 TEST(Config, ReadsKnownKeysAndNamesBadOnes) {
