@@ -58,8 +58,8 @@ std::string ExplainCallError(const absl::Status& s, const ClientOptions& options
       // an idle session) say what they are.
       if (m == "Deadline Exceeded" && options.call_timeout.count() > 0)
         return "the call did not complete within " +
-               ShortestText(double(options.call_timeout.count()) / 1000) +
-               " s (--timeout-s bounds each call, a whole frame included)";
+               ShortestText(double(options.call_timeout.count()) / 1000) + " s (" +
+               options.call_timeout_means + ")";
       return "DEADLINE_EXCEEDED: " + m;
     default:
       return std::string(absl::StatusCodeToString(s.code())) + ": " + m;

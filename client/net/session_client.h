@@ -37,6 +37,8 @@ struct ClientOptions {
   // that never completes the connection is given up after gRPC's 20 s connect timeout, one
   // that connects and never answers is waited for).
   std::chrono::milliseconds call_timeout{30000};
+  // What call_timeout bounds, in the client's own words, for the message of a call past it.
+  std::string call_timeout_means = "--timeout-s bounds each call, a whole frame included";
   int64_t max_frame_triangles = kDefaultMaxFrameTriangles;
 };
 

@@ -210,6 +210,8 @@ int Run(const Args& args) {
   options.max_frame_triangles = args.max_frame_triangles;
   // Connecting and the volume's description wait no longer than the frames do.
   options.call_timeout = std::chrono::seconds(args.timeout_s);
+  // Frames are bounded by silence, not as a whole (Connection): only the unary calls by this.
+  options.call_timeout_means = "--timeout-s bounds each wait for the server";
   if (!args.tls_ca.empty()) {
     auto pem = net::ReadTlsCa(args.tls_ca);
     if (!pem.ok()) return Fail(pem.status());
