@@ -8,6 +8,7 @@
 #include "client/net/session_client.h"
 #include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
+#include "server/cli/connection_args.h"
 #include "shared/file_io.h"
 #include "shared/frame_notes.h"
 #include "shared/mesh_weld.h"
@@ -20,14 +21,11 @@ namespace {
 namespace pb = ::isostream::v1;
 
 struct FetchArgs {
-  std::string server = "127.0.0.1:7878";
+  ConnectionArgs connection;
   std::string volume;
   ViewArgs view;
-  std::string token;
   std::string codec = "draco";
-  std::string tls_ca;
   int64_t max_frame_triangles = net::kDefaultMaxFrameTriangles;
-  int timeout_s = 60;
   bool progressive = false;
   std::string output;
   bool stats = false;
@@ -80,16 +78,10 @@ int RunFetch(const FetchArgs& args) {
   // the server's refusal, exit 1, where extract exits 2 for it).
   if (const absl::Status valid = CheckViewArgs(args.view); !valid.ok())
     return fail(std::string(valid.message()), 2);
-  net::ClientOptions options;
-  options.address = args.server;
-  options.token = args.token;
+  auto made = MakeClientOptions(args.connection);
+  if (!made.ok()) return fail(std::string(made.status().message()), 2);
+  net::ClientOptions options = std::move(*made);
   options.max_frame_triangles = args.max_frame_triangles;
-  options.call_timeout = std::chrono::seconds(args.timeout_s);
-  if (!args.tls_ca.empty()) {
-    auto pem = net::ReadTlsCa(args.tls_ca);
-    if (!pem.ok()) return fail(std::string(pem.status().message()), 2);
-    options.tls_ca_pem = std::move(*pem);
-  }
   auto client = net::Client::Connect(options);
   if (!client.ok())  // a bad address or token: an argument
     return fail(std::string(client.status().message()),
@@ -149,23 +141,19 @@ CLI::App* AddFetchCommand(CLI::App& app, int* exit_code) {
   auto* cmd = app.add_subcommand(
       "fetch", "Ask a running isostreamd for one frame and write it (decoded) as PLY");
   auto args = std::make_shared<FetchArgs>();
-  cmd->add_option("--server", args->server, "isostreamd address HOST:PORT")->capture_default_str();
+  AddConnectionOptions(cmd, &args->connection,
+                       "each call (the volume's facts, then the whole frame) fails after this "
+                       "many seconds, connecting included (default 60; 0: wait forever)");
   cmd->add_option("--volume", args->volume,
                   "catalogue name (or a generator spec such as "
                   "buckyball:129 when the daemon has no catalogue)")
       ->required();
   AddViewOptions(cmd, &args->view);
-  cmd->add_option("--token", args->token, "bearer token, if the daemon requires one");
   cmd->add_option("--codec", args->codec, "draco (default) or raw")
       ->check(CLI::IsMember({"draco", "raw"}));
-  cmd->add_option("--tls-ca", args->tls_ca, "PEM root certificates: connect with TLS");
   cmd->add_option("--max-frame-triangles", args->max_frame_triangles,
                   "refuse a frame past this many triangles (default 2^26)")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
-  cmd->add_option("--timeout-s", args->timeout_s,
-                  "each call (the volume's facts, then the whole frame) fails after this many "
-                  "seconds, connecting included (default 60; 0: wait forever)")
-      ->check(CLI::Range(0, 86400));
   cmd->add_flag("--progressive", args->progressive, "let the server send a coarse frame first");
   cmd->add_option("-o,--output", args->output, "out.ply")->required();
   cmd->add_flag("--stats", args->stats, "print counts, sizes and timings");

@@ -10,5 +10,7 @@ CLI::App* AddInfoCommand(CLI::App& app, int* exit_code);
 CLI::App* AddTetsCommand(CLI::App& app, int* exit_code);
 CLI::App* AddExtractCommand(CLI::App& app, int* exit_code);
 CLI::App* AddFetchCommand(CLI::App& app, int* exit_code);
+CLI::App* AddVolumesCommand(CLI::App& app, int* exit_code);
+CLI::App* AddStatsCommand(CLI::App& app, int* exit_code);
 
 }  // namespace isostream::cli

@@ -16,13 +16,17 @@ int main(int argc, char** argv) {
   isostream::cli::AddTetsCommand(app, &exit_code);
   isostream::cli::AddExtractCommand(app, &exit_code);
   isostream::cli::AddFetchCommand(app, &exit_code);
+  isostream::cli::AddVolumesCommand(app, &exit_code);
+  isostream::cli::AddStatsCommand(app, &exit_code);
   // CLI11 says only "A subcommand is required" for a misspelt one.
   if (argc > 1 && argv[1][0] != '-') {
     try {
       app.get_subcommand(argv[1]);
     } catch (const CLI::OptionNotFound&) {
-      std::fprintf(stderr, "isostream: unknown command '%s' (info, tets, extract or fetch)\n",
-                   argv[1]);
+      std::fprintf(
+          stderr,
+          "isostream: unknown command '%s' (info, tets, extract, fetch, volumes or stats)\n",
+          argv[1]);
       return 2;
     }
   }

@@ -142,7 +142,7 @@ absl::Status VolumeCatalogue::Check(const std::string& name, std::string* canoni
     if (options_.volumes.size() > kNamed)
       known += " and " + std::to_string(options_.volumes.size() - kNamed) + " more";
     return absl::NotFoundError("unknown volume " + Quoted(name) + "; the catalogue has " + known +
-                               " (ListVolumes lists them)");
+                               " (`isostream volumes` lists them)");
   }
   return absl::OkStatus();
 }

@@ -34,6 +34,23 @@ class GuardedDaemon : public Daemon {
   }
 };
 
+// `isostream stats` prints the daemon's counters by their proto names, with the token the
+// daemon requires (without it, the token's message).
+TEST_F(GuardedDaemon, TheStatsCommandPrintsTheCounters) {
+  const std::string stats =
+      ShellQuote(ISOSTREAM_CLI_PATH) + " stats --server " + daemon_->address();
+  const CommandResult refused = RunCommand(stats);
+  EXPECT_EQ(refused.code, 1);
+  EXPECT_NE(refused.output.find("refused the token"), std::string::npos) << refused.output;
+  ASSERT_TRUE(Connect("s3cret")->Fetch(MakeView("sphere:17", 1, 0.01, glm::dvec3(2, 2, 2))).ok());
+  const CommandResult r = RunCommand(stats + " --token s3cret");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("serving                true\n"), std::string::npos) << r.output;
+  const size_t sent = r.output.find("frames_sent ");
+  ASSERT_NE(sent, std::string::npos) << r.output;
+  EXPECT_GE(std::stoll(r.output.substr(sent + 12)), 1) << r.output;
+}
+
 TEST_F(GuardedDaemon, TokenIsRequired) {
   const auto view = MakeView("buckyball:65", 1, 0.05, glm::dvec3(2, 2, 2));
   const absl::Status missing = Connect()->Fetch(view).status();
@@ -225,6 +242,25 @@ TEST_F(ConfiguredDaemon, ARelativePathIsTheConfigFilesOwn) {
   EXPECT_EQ(info->dims(0), 8);
   EXPECT_EQ(info->min_value(), 0.0f);
   EXPECT_EQ(info->max_value(), 21.0f);
+}
+
+// `isostream volumes` lists the catalogue (the daemon's "unknown volume" message points at it)
+// and, with --info, each volume's facts, or why one is not served (exit 1 then).
+TEST_F(ConfiguredDaemon, TheVolumesCommandListsTheCatalogueAndItsFacts) {
+  const CommandResult r = RunCommand(ShellQuote(ISOSTREAM_CLI_PATH) + " volumes --server " +
+                                     daemon_->address() + " --info");
+  EXPECT_EQ(r.code, 1) << r.output;  // "damaged"
+  EXPECT_NE(r.output.find("ball\n  dims            65 x 65 x 65\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("ramp\n  dims            8 x 8 x 8\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("  value range     [0, 21]\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("damaged\n  not served: "), std::string::npos) << r.output;
+  const CommandResult names =
+      RunCommand(ShellQuote(ISOSTREAM_CLI_PATH) + " volumes --server " + daemon_->address());
+  EXPECT_EQ(names.code, 0) << names.output;
+  EXPECT_EQ(names.output, "ball\nbig\ndamaged\nramp\n");
+  auto unknown = Connect()->Fetch(MakeView("nope", 1, 0.01, glm::dvec3(2, 2, 2)));
+  EXPECT_NE(unknown.status().message().find("`isostream volumes` lists them"), std::string::npos)
+      << unknown.status();
 }
 
 // The damaged catalogue file is refused to whoever asks for it, every time (clients learn the

@@ -1,0 +1,27 @@
+// The flags of the subcommands that talk to a running isostreamd (fetch, volumes, stats): where
+// it is, how to authenticate, and how long to wait.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <string>
+
+#include "client/net/session_client.h"
+#include "shared/status.h"
+
+namespace isostream::cli {
+
+struct ConnectionArgs {
+  std::string server = "127.0.0.1:7878";
+  std::string token;
+  std::string tls_ca;
+  int timeout_s = 60;
+};
+
+// --server, --token, --tls-ca and --timeout-s; `timeout_means` is --timeout-s's help.
+void AddConnectionOptions(CLI::App* cmd, ConnectionArgs* args, const std::string& timeout_means);
+
+// The client options for `args`; InvalidArgument for a --tls-ca file that holds no
+// certificate.
+absl::StatusOr<net::ClientOptions> MakeClientOptions(const ConnectionArgs& args);
+
+}  // namespace isostream::cli
