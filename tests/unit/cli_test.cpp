@@ -101,7 +101,7 @@ TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {
   const Case cases[] = {
       {"info --volume /no/such/file.nii", "/no/such/file.nii"},
       {"info --volume nosuch:33", "unknown generator"},
-      {"extarct --volume sphere:17", "unknown command 'extarct' (info, tets, extract or fetch)"},
+      {"extarct --volume sphere:17", "unknown command 'extarct' (info, tets, extract, fetch, volumes or stats)"},
       {"extract --volume sphere:17 --iso 0.5 --budget 0 -o " + out, "--budget"},
       {"extract --volume sphere:17 --iso 0.5 --eps -1 -o " + out, "--eps must be a finite"},
       {"extract --volume sphere:17 --iso 0.5 --eps inf -o " + out, "--eps must be a finite"},
