@@ -408,7 +408,10 @@ int main(int argc, char** argv) {
   app.add_option("--iso", args.iso, "isovalues, comma separated (default: 20/40/60% of the range)")
       ->check(isostream::GivenNumber());  // given but empty: an error, not the defaults
   const CLI::Validator given_number = isostream::GivenNumber();
-  auto* eps = app.add_option("--eps", args.eps, "error bound in data units")->check(given_number);
+  auto* eps = app.add_option("--eps", args.eps,
+                             "error bound in data units (default, without --budget: 0.2% of the "
+                             "volume's value range)")
+                  ->check(given_number);
   auto* budget = app.add_option("--budget", args.budget, "triangle budget")
                      ->transform(isostream::GivenCount());
   eps->excludes(budget);
