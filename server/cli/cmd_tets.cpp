@@ -9,7 +9,8 @@ namespace isostream::cli {
 namespace {
 
 nlohmann::json Vec(const glm::ivec3& v) { return {v.x, v.y, v.z}; }
-nlohmann::json Vec(const glm::dvec3& v) { return {v.x, v.y, v.z}; }
+// + 0.0 turns a -0.0 (a normal's zero component, negated) into 0 for the reader.
+nlohmann::json Vec(const glm::dvec3& v) { return {v.x + 0.0, v.y + 0.0, v.z + 0.0}; }
 
 void PrintTets(bool json) {
   const ReferenceTets& tables = ReferenceTets::Get();
