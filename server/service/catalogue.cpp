@@ -64,7 +64,7 @@ absl::Status CheckGeneratorSpec(const std::string& spec, int max_dim,
   if (n < 2 || n > max_dim)
     return absl::NotFoundError("unknown volume " + Quoted(spec) +
                                ": generators are served with 2.." + std::to_string(max_dim) +
-                               " samples per axis");
+                               " samples per axis (the daemon's --max-dim)");
   return absl::OkStatus();
 }
 
