@@ -425,8 +425,8 @@ TEST(Catalogue, UnknownNamesAreQuotedWithinBounds) {
   VolumeCatalogue named(o);
   EXPECT_EQ(named.Check("").message(), "no volume named");
   const std::string list =
-      "'v10', 'v11', 'v12', 'v13', 'v14', 'v15', 'v16', 'v17', 'v18', 'v19' (ListVolumes lists "
-      "them)";
+      "'v10', 'v11', 'v12', 'v13', 'v14', 'v15', 'v16', 'v17', 'v18', 'v19' (`isostream "
+      "volumes` lists them)";
   EXPECT_EQ(named.Check("x").message(), "unknown volume 'x'; the catalogue has " + list);
   const std::string hundred(100, 'h');
   EXPECT_EQ(named.Check(hundred).message(),
