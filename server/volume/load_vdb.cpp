@@ -122,6 +122,12 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec, const
   try {
     // Delayed loading would defer reading (and its errors) to first access, past this edge.
     file.open(/*delayLoad=*/false);
+  } catch (const openvdb::LookupError& e) {
+    // A sound file holding a grid type this build does not know (a newer library's, a custom
+    // tree): OpenVDB opens the file's grids all at once, so none of them can be read here.
+    return absl::InvalidArgumentError(path + ": holds a grid type this OpenVDB (" +
+                                      openvdb::getLibraryVersionString() +
+                                      ") cannot read, so none of its grids can be: " + e.what());
   } catch (const std::exception& e) {
     return absl::DataLossError(path + ": corrupt or truncated OpenVDB file: " + e.what());
   }
@@ -197,8 +203,17 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec, const
   }
   if (grid == nullptr) return absl::DataLossError(where + ": grid did not read as a float grid");
 
-  const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
+  openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
   if (box.empty()) return absl::InvalidArgumentError(where + ": grid has no active voxels");
+  // A level set or fog volume goes on past its active voxels (inactive ones, the background):
+  // its surfaces may lie between the last active voxel and what is beyond, and were cut open
+  // where the active box ended. One voxel of what lies beyond closes them. A grid of another
+  // class is its active box, as dense data (a scan, a simulation's domain) are: a margin of
+  // background would add a surface on the box's faces, and move a 1024^3 grid past the 1025^3
+  // cube.
+  if (grid->getGridClass() == openvdb::GRID_LEVEL_SET ||
+      grid->getGridClass() == openvdb::GRID_FOG_VOLUME)
+    box.expand(1);
   ISOSTREAM_RETURN_IF_ERROR(CheckDims(BoxDims(box), limits, where));
 
   // Samples sit on an axis-aligned lattice downstream: scale + translate maps load, with axes

@@ -38,11 +38,19 @@ bool LooksLikeGenerator(std::string_view spec) {
   });
 }
 
+// Where ".vdb#" (any case, as the extension) first occurs in spec, or npos.
+size_t FindVdbHash(std::string_view spec) {
+  for (size_t at = spec.find('#'); at != std::string_view::npos; at = spec.find('#', at + 1))
+    if (at >= 4 && absl::EqualsIgnoreCase(absl::string_view(spec.data() + at - 4, 4), ".vdb"))
+      return at - 4;
+  return std::string_view::npos;
+}
+
 // Ends with a volume file's extension, or holds ".vdb#" (a grid named after the file).
 bool NamesVolumeFile(std::string_view spec) {
   const absl::string_view s(spec.data(), spec.size());
   return absl::EndsWithIgnoreCase(s, ".vdb") || absl::EndsWithIgnoreCase(s, ".nii") ||
-         absl::EndsWithIgnoreCase(s, ".nii.gz") || spec.find(".vdb#") != std::string_view::npos;
+         absl::EndsWithIgnoreCase(s, ".nii.gz") || FindVdbHash(spec) != std::string_view::npos;
 }
 
 // NAME:N[:SEED].
@@ -164,7 +172,7 @@ absl::StatusOr<VolumeSpec> ParseVolumeSpec(std::string_view spec, const VolumeLi
   out.path = out.text;
   // PATH.vdb#GRID: the grid name is everything after the first ".vdb#" (it may hold '#'),
   // unless a file has the whole name: it is read whole then.
-  const size_t vdb_hash = spec.find(".vdb#");
+  const size_t vdb_hash = FindVdbHash(spec);
   if (vdb_hash != std::string_view::npos && !CheckInputFile(out.text).ok()) {
     const size_t hash = vdb_hash + 4;
     out.path = out.text.substr(0, hash);
