@@ -55,6 +55,15 @@ glm::dmat4 Camera::ProjectionMatrixInDouble() const {
   return glm::perspective(glm::radians(double(fov_y_degrees)), double(aspect), n, f);
 }
 
+VerticalFrame FrameAbout(const glm::vec3& up) {
+  VerticalFrame f;
+  f.up = glm::vec3(glm::normalize(glm::dvec3(up)));
+  const glm::vec3 along = std::abs(f.up.z) < 0.9f ? glm::vec3(0, 0, 1) : glm::vec3(1, 0, 0);
+  f.front = glm::normalize(along - glm::dot(along, f.up) * f.up);
+  f.side = glm::cross(f.up, f.front);
+  return f;
+}
+
 float LengthOf(const glm::vec3& v) { return float(glm::length(glm::dvec3(v))); }
 
 void EncloseSphere(float distance, float radius, Camera* camera) {

@@ -36,6 +36,14 @@ struct Camera {
   glm::dmat4 ProjectionMatrixInDouble() const;
 };
 
+// A right-handed frame about a vertical `up` (any length): side, up and front unit vectors,
+// the world's x, y and z for +y. Front is the world's z made perpendicular to up (its x where
+// up lies near z). Default views and orbits are laid out in it, so --up turns them whole.
+struct VerticalFrame {
+  glm::vec3 side, up, front;
+};
+VerticalFrame FrameAbout(const glm::vec3& up);
+
 // |v|, computed in double: the square of a float vector's length underflows below ~1e-19 and
 // overflows above ~1e19, inside the sizes a volume may have.
 float LengthOf(const glm::vec3& v);

@@ -47,6 +47,7 @@ struct Args {
   double eps = std::nan("");  // NaN: not given
   int64_t budget = -1;
   std::string eye;
+  std::string up = "0,1,0";
   std::string size = "800x800";
   std::string output;
   std::string token;
@@ -268,8 +269,15 @@ int Run(const Args& args) {
   }
   render::Camera base;
   base.aspect = float(width) / float(height);
-  base.up = {0, 1, 0};
-  glm::vec3 direction(0.8f, 0.6f, 1.0f);
+  auto up = ParseNumbers(args.up, "--up");
+  if (!up.ok()) return Fail(up.status());
+  if (up->size() != 3) return Fail(absl::InvalidArgumentError("--up needs x,y,z"));
+  base.up = glm::vec3((*up)[0], (*up)[1], (*up)[2]);
+  if (!(render::LengthOf(base.up) > 0) || !std::isfinite(render::LengthOf(base.up)))
+    return Fail(absl::InvalidArgumentError("--up " + args.up + " has no direction"));
+  // From the front, a little to the side and above, whatever the vertical.
+  const render::VerticalFrame vertical = render::FrameAbout(base.up);
+  glm::vec3 direction = 0.8f * vertical.side + 0.6f * vertical.up + 1.0f * vertical.front;
   const glm::vec3 center = 0.5f * (lo + hi);
   render::Camera camera = render::FrameBox(lo, hi, direction, base);
   // Single precision places boxes from ~1e-30 to ~1e30 world units, not all of them viewably.
@@ -331,6 +339,7 @@ int Run(const Args& args) {
     window.height = height;
     window.state = state;
     window.camera = camera;
+    window.world_up = base.up;
     window.value_range = value_range;
     window.scene_radius = 0.5f * render::LengthOf(hi - lo);
     window.exit_after_frames = args.exit_after_frames;
@@ -415,6 +424,9 @@ int main(int argc, char** argv) {
   auto* budget = app.add_option("--budget", args.budget, "triangle budget")
                      ->transform(isostream::GivenCount());
   eps->excludes(budget);
+  app.add_option("--up", args.up,
+                 "the picture's vertical x,y,z: the default view stands on it, --orbit and the "
+                 "window's drag turn about it (default 0,1,0)");
   app.add_option("--eye", args.eye, "perspective eye x,y,z (default: framing the volume)")
       ->check(given_number);  // given but empty: an error, as fetch says, not the default view
   app.add_option("--size", args.size, "image size WxH (default 800x800)");

@@ -27,23 +27,28 @@ namespace {
 
 std::string g_glfw_error;  // GLFW reports errors through a callback, before any window exists
 
-// The orbit the mouse drives: the eye on a sphere around the target.
+// The orbit the mouse drives: the eye on a sphere around the target, yaw about the vertical
+// (`up`, --up) and pitch towards it, in the frame (side, up, front) that is the world's x, y, z
+// for the default vertical +y.
 struct Orbit {
   glm::vec3 target{0.0f};
+  glm::vec3 up{0, 1, 0}, front{0, 0, 1}, side{1, 0, 0};
   float distance = 1, yaw = 0, pitch = 0;
 
-  static Orbit From(const render::Camera& c) {
+  static Orbit From(const render::Camera& c, const glm::vec3& vertical) {
     Orbit o;
     o.target = c.target;
+    const render::VerticalFrame frame = render::FrameAbout(vertical);
+    o.up = frame.up, o.front = frame.front, o.side = frame.side;
     const glm::vec3 d = c.eye - c.target;
     o.distance = render::LengthOf(d);
-    o.yaw = std::atan2(d.x, d.z);
-    o.pitch = std::asin(std::clamp(d.y / o.distance, -1.0f, 1.0f));
+    o.yaw = std::atan2(glm::dot(d, o.side), glm::dot(d, o.front));
+    o.pitch = std::asin(std::clamp(glm::dot(d, o.up) / o.distance, -1.0f, 1.0f));
     return o;
   }
   glm::vec3 Eye() const {
-    return target + distance * glm::vec3(std::cos(pitch) * std::sin(yaw), std::sin(pitch),
-                                         std::cos(pitch) * std::cos(yaw));
+    return target + distance * (std::cos(pitch) * std::sin(yaw) * side + std::sin(pitch) * up +
+                                std::cos(pitch) * std::cos(yaw) * front);
   }
 };
 
@@ -161,7 +166,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
   (*renderer)->SetPalette(palette);
 
   Input input;
-  input.orbit = Orbit::From(options.camera);
+  input.orbit = Orbit::From(options.camera, options.world_up);
   input.min_distance = 1e-3f * options.scene_radius;
   input.max_distance = std::max(1e3f * options.scene_radius, input.orbit.distance);
   glfwSetWindowUserPointer(window, &input);
@@ -234,7 +239,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
     glfwPollEvents();
     if (input.changed) {
       if (input.reset) {
-        input.orbit = Orbit::From(options.camera);
+        input.orbit = Orbit::From(options.camera, options.world_up);
         state = options.state;
         input.reset = false;
       }
@@ -259,6 +264,7 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
       input.iso_steps = 0;
       camera.eye = input.orbit.Eye();
       camera.target = input.orbit.target;
+      camera.up = render::UsableUp(camera.target - camera.eye, options.world_up);
       // The planes the initial camera had belong to its distance: zoomed in, near cut the
       // volume's front away, and past it the whole picture.
       render::EncloseSphere(input.orbit.distance, options.scene_radius, &camera);

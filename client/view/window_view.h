@@ -16,9 +16,10 @@ struct WindowOptions {
   int width = 1024;
   int height = 768;
   ViewState state;
-  render::Camera camera;   // initial eye and target; orbiting keeps the target
-  double value_range = 1;  // max - min of the volume, for the isovalue keys
-  float scene_radius = 1;  // of the volume's bounding sphere: near and far follow the zoom
+  render::Camera camera;        // initial eye and target; orbiting keeps the target
+  glm::vec3 world_up{0, 1, 0};  // the vertical (--up): orbits turn about it
+  double value_range = 1;       // max - min of the volume, for the isovalue keys
+  float scene_radius = 1;       // of the volume's bounding sphere: near and far follow the zoom
   // For tests and scripts: close after this many refined frames have been shown, writing a
   // screenshot of the last one to `screenshot` (if not empty). 0: run until closed.
   int exit_after_frames = 0;
@@ -27,8 +28,9 @@ struct WindowOptions {
   // `orbit` views are drawn (0: only the user moves it): a scripted run of --exit-after N > 1
   // otherwise never got past its first frame.
   int orbit = 0;
-  // With exit_after_frames: fail after this long without data while a frame is awaited (0:
-  // never), as the headless viewer does, so a stalled daemon cannot hold a script.
+  // With exit_after_frames: fail after this long without data while a frame is awaited, or
+  // without a move once the frames so far are in (0: never), so neither a stalled daemon nor a
+  // count no move will reach holds a script.
   int timeout_s = 0;
 };
 
