@@ -78,14 +78,11 @@ int RunFetch(const FetchArgs& args) {
   // the server's refusal, exit 1, where extract exits 2 for it).
   if (const absl::Status valid = CheckViewArgs(args.view); !valid.ok())
     return fail(std::string(valid.message()), 2);
-  auto made = MakeClientOptions(args.connection);
-  if (!made.ok()) return fail(std::string(made.status().message()), 2);
-  net::ClientOptions options = std::move(*made);
+  net::ClientOptions options;
   options.max_frame_triangles = args.max_frame_triangles;
-  auto client = net::Client::Connect(options);
-  if (!client.ok())  // a bad address or token: an argument
-    return fail(std::string(client.status().message()),
-                client.status().code() == absl::StatusCode::kInvalidArgument ? 2 : 1);
+  auto client = ConnectTo(args.connection, &options);
+  if (!client.ok())
+    return fail(std::string(client.status().message()), ExitCodeFor(client.status()));
 
   // The default view (no --eye, no --view-dir) depends on the volume's bounds, and the notes on
   // isovalues on its values, which only the server knows.

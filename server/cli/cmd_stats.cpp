@@ -15,14 +15,12 @@ int RunStats(const ConnectionArgs& args) {
     std::cerr << "isostream stats: " << m << "\n";
     return code;
   };
-  auto options = MakeClientOptions(args);
-  if (!options.ok()) return fail(std::string(options.status().message()), 2);
-  auto client = net::Client::Connect(*options);
+  net::ClientOptions options;
+  auto client = ConnectTo(args, &options);
   if (!client.ok())
-    return fail(std::string(client.status().message()),
-                client.status().code() == absl::StatusCode::kInvalidArgument ? 2 : 1);
+    return fail(std::string(client.status().message()), ExitCodeFor(client.status()));
   auto stats = (*client)->GetServerStats();
-  if (!stats.ok()) return fail(net::ExplainCallError(stats.status(), *options), 1);
+  if (!stats.ok()) return fail(net::ExplainCallError(stats.status(), options), 1);
   // Every field by its proto name, one per line: as the wire contract documents them, and easy
   // for a script to pick out.
   const auto* descriptor = stats->GetDescriptor();

@@ -39,14 +39,12 @@ int RunVolumes(const VolumesArgs& args) {
     std::cerr << "isostream volumes: " << m << "\n";
     return code;
   };
-  auto options = MakeClientOptions(args.connection);
-  if (!options.ok()) return fail(std::string(options.status().message()), 2);
-  auto client = net::Client::Connect(*options);
+  net::ClientOptions options;
+  auto client = ConnectTo(args.connection, &options);
   if (!client.ok())
-    return fail(std::string(client.status().message()),
-                client.status().code() == absl::StatusCode::kInvalidArgument ? 2 : 1);
+    return fail(std::string(client.status().message()), ExitCodeFor(client.status()));
   auto list = (*client)->ListVolumes();
-  if (!list.ok()) return fail(net::ExplainCallError(list.status(), *options), 1);
+  if (!list.ok()) return fail(net::ExplainCallError(list.status(), options), 1);
   if (list->generators_allowed())
     std::printf(
         "no catalogue: generator specs (cayley:N, buckyball:N, sphere:N, shells:N, "
@@ -61,7 +59,7 @@ int RunVolumes(const VolumesArgs& args) {
     if (info.ok()) {
       PrintInfo(*info);
     } else {
-      std::printf("  not served: %s\n", net::ExplainCallError(info.status(), *options).c_str());
+      std::printf("  not served: %s\n", net::ExplainCallError(info.status(), options).c_str());
       ++failed;
     }
   }

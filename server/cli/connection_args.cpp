@@ -12,17 +12,21 @@ void AddConnectionOptions(CLI::App* cmd, ConnectionArgs* args, const std::string
   cmd->add_option("--timeout-s", args->timeout_s, timeout_means)->check(CLI::Range(0, 86400));
 }
 
-absl::StatusOr<net::ClientOptions> MakeClientOptions(const ConnectionArgs& args) {
-  net::ClientOptions options;
-  options.address = args.server;
-  options.token = args.token;
-  options.call_timeout = std::chrono::seconds(args.timeout_s);
+absl::StatusOr<std::unique_ptr<net::Client>> ConnectTo(const ConnectionArgs& args,
+                                                       net::ClientOptions* options) {
+  options->address = args.server;
+  options->token = args.token;
+  options->call_timeout = std::chrono::seconds(args.timeout_s);
   if (!args.tls_ca.empty()) {
     auto pem = net::ReadTlsCa(args.tls_ca);
     if (!pem.ok()) return pem.status();
-    options.tls_ca_pem = std::move(*pem);
+    options->tls_ca_pem = std::move(*pem);
   }
-  return options;
+  return net::Client::Connect(*options);
+}
+
+int ExitCodeFor(const absl::Status& status) {
+  return status.code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
 }
 
 }  // namespace isostream::cli

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <memory>
 #include <string>
 
 #include "client/net/session_client.h"
@@ -20,8 +21,13 @@ struct ConnectionArgs {
 // --server, --token, --tls-ca and --timeout-s; `timeout_means` is --timeout-s's help.
 void AddConnectionOptions(CLI::App* cmd, ConnectionArgs* args, const std::string& timeout_means);
 
-// The client options for `args`; InvalidArgument for a --tls-ca file that holds no
-// certificate.
-absl::StatusOr<net::ClientOptions> MakeClientOptions(const ConnectionArgs& args);
+// Sets `options`' address, token, timeout and TLS roots from `args` (its other fields are the
+// caller's) and connects. InvalidArgument for a --tls-ca file that holds no certificate or an
+// address or token gRPC cannot take: an argument's fault (exit 2, ExitCodeFor).
+absl::StatusOr<std::unique_ptr<net::Client>> ConnectTo(const ConnectionArgs& args,
+                                                       net::ClientOptions* options);
+
+// 2 for an argument's fault (InvalidArgument), else 1.
+int ExitCodeFor(const absl::Status& status);
 
 }  // namespace isostream::cli
