@@ -52,6 +52,14 @@ struct ProducerRig {
   ServedVolumePtr volume;  // null if it could not be prepared
 };
 
+// Runs `view` once through the rig's producer into `sink`, started now, never cancelled.
+absl::Status RunNow(ProducerRig& rig, const ::isostream::v1::ViewRequest& view,
+                    const ExtractRequest& request, ChunkSink* sink) {
+  std::atomic<bool> cancel{false};
+  const auto now = std::chrono::steady_clock::now();
+  return rig.producer.Run(*rig.volume, view, request, 1, &cancel, sink, now, now);
+}
+
 // A view of buckyball:65 at isovalues `isos` and `eps`; callers place the eye.
 ::isostream::v1::ViewRequest BuckyballView(const std::vector<float>& isos, double eps) {
   ::isostream::v1::ViewRequest view;
@@ -78,9 +86,7 @@ absl::Status ProduceIntoStuckSink(int chunk, int queued, int deadline_ms,
   view.mutable_camera()->mutable_eye()->set_x(3);
   auto request = ToExtractRequest(view, Limits{}, 0);
   if (!request.ok()) return request.status();
-  std::atomic<bool> cancel{false};
-  const auto now = std::chrono::steady_clock::now();
-  return rig.producer.Run(*rig.volume, view, *request, 1, &cancel, sink, now, now);
+  return RunNow(rig, view, *request, sink);
 }
 
 // Takes its first `slow` chunks one per 100 ms from the first push, the rest at once: a client
@@ -187,10 +193,8 @@ TEST(FrameProducer, ChunksCoverTheFrameInOrder) {
   view.mutable_camera()->mutable_eye()->set_y(-3);
   auto request = ToExtractRequest(view, Limits{}, 0);
   ASSERT_TRUE(request.ok());
-  std::atomic<bool> cancel{false};
   StuckSink sink;
-  const auto now = std::chrono::steady_clock::now();
-  ASSERT_TRUE(rig.producer.Run(*rig.volume, view, *request, 1, &cancel, &sink, now, now).ok());
+  ASSERT_TRUE(RunNow(rig, view, *request, &sink).ok());
   auto direct =
       Extract(*rig.volume->prepared.hierarchy, rig.volume->prepared.grid_to_world, *request);
   ASSERT_TRUE(direct.ok());
@@ -334,6 +338,246 @@ OrderedMesh DisjointTriangles(uint32_t n) {
     c.set_chunk_count(index + 1);
   }
   return c;
+}
+
+// Takes every chunk but a frame's last one: a newer view took over as the frame went out.
+class RefusesTheLastChunkSink : public ChunkSink {
+ public:
+  bool Push(uint64_t, ::isostream::v1::FrameChunk&& chunk) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (chunk.last()) return false;
+    ++taken_;
+    return true;
+  }
+  size_t Queued() const override { return 0; }
+  size_t taken() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return taken_;
+  }
+
+ private:
+  mutable std::mutex mu_;
+  size_t taken_ = 0;
+};
+
+// A frame whose last chunk the stream refused did not go out: it is cancelled, not complete,
+// though it was extracted and cut whole.
+TEST(FrameProducer, AFrameWhoseLastChunkIsRefusedIsCancelled) {
+  FrameSettings settings;
+  settings.first_chunk_triangles = settings.chunk_triangles = 1000;
+  ProducerRig rig(settings, 1);
+  ASSERT_TRUE(rig.volume);
+  ::isostream::v1::ViewRequest view = BuckyballView({0.1f}, 0.01);
+  view.mutable_camera()->mutable_eye()->set_x(-3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok());
+  RefusesTheLastChunkSink sink;
+  const absl::Status s = RunNow(rig, view, *request, &sink);
+  EXPECT_EQ(s.code(), absl::StatusCode::kCancelled) << s;
+  EXPECT_GT(sink.taken(), 0u);
+  EXPECT_EQ(rig.counters.frames_cancelled.load(), 1);
+  EXPECT_EQ(rig.counters.frames_failed.load(), 0);
+}
+
+// A deadline that has passed when the extraction starts stops the frame with the daemon's
+// deadline in the message, whichever part of the work noticed it first.
+TEST(FrameProducer, APassedDeadlineNamesTheDaemonsDeadline) {
+  FrameSettings settings;
+  settings.deadline_ms = 0;
+  ProducerRig rig(settings, 1);
+  ASSERT_TRUE(rig.volume);
+  for (bool budget : {false, true}) {
+    ::isostream::v1::ViewRequest view = BuckyballView({0.05f, 0.15f}, 0.002);
+    if (budget) view.set_triangle_budget(30000);
+    view.mutable_camera()->mutable_eye()->set_y(3);
+    auto request = ToExtractRequest(view, Limits{}, 0);
+    ASSERT_TRUE(request.ok());
+    std::atomic<bool> cancel{false};
+    StuckSink sink;
+    const auto before = std::chrono::steady_clock::now() - std::chrono::milliseconds(50);
+    const absl::Status s =
+        rig.producer.Run(*rig.volume, view, *request, 1, &cancel, &sink, before, before);
+    EXPECT_EQ(s.code(), absl::StatusCode::kDeadlineExceeded) << s;
+    EXPECT_NE(s.message().find("the daemon's deadline of 0 ms"), std::string::npos) << s;
+  }
+}
+
+// The frame limit is a number of triangles a frame may have: a frame of exactly that many goes
+// out whole, one more than the limit is refused.
+TEST(FrameProducer, AFrameOfExactlyTheTriangleLimitGoesOut) {
+  ::isostream::v1::ViewRequest view = BuckyballView({0.1f}, 0.01);
+  view.mutable_camera()->mutable_eye()->set_z(3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok()) << request.status();
+  int64_t triangles = 0;
+  {
+    ProducerRig rig(FrameSettings{}, 1);
+    ASSERT_TRUE(rig.volume);
+    auto direct =
+        Extract(*rig.volume->prepared.hierarchy, rig.volume->prepared.grid_to_world, *request);
+    ASSERT_TRUE(direct.ok()) << direct.status();
+    triangles = int64_t(direct->mesh.triangle_count());
+  }
+  ASSERT_GT(triangles, 100);
+  for (int64_t limit : {triangles, triangles - 1}) {
+    FrameSettings settings;
+    settings.max_triangles = limit;
+    settings.max_queued_chunks = 1000;  // the sink never drains
+    ProducerRig rig(settings, 1);
+    ASSERT_TRUE(rig.volume);
+    StuckSink sink;
+    const absl::Status s = RunNow(rig, view, *request, &sink);
+    if (limit == triangles) {
+      ASSERT_TRUE(s.ok()) << s;
+      ASSERT_FALSE(sink.chunks_.empty());
+      EXPECT_EQ(sink.chunks_.back().stats().triangles(), triangles);
+    } else {
+      EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted) << s;
+    }
+  }
+}
+
+// Triangles of the coarse and of the refined frames in `chunks`.
+std::pair<int64_t, int64_t> CoarseAndRefinedTriangles(
+    const std::vector<::isostream::v1::FrameChunk>& chunks) {
+  std::pair<int64_t, int64_t> n{0, 0};
+  for (const auto& c : chunks) (c.coarse() ? n.first : n.second) += c.triangle_count();
+  return n;
+}
+
+// A progressive view whose frame has no more triangles than the coarse budget gets that frame
+// alone (exactly the budget included); one triangle more, and a coarse frame comes first.
+TEST(FrameProducer, AProgressiveFrameOfAtMostTheCoarseBudgetComesAlone) {
+  ::isostream::v1::ViewRequest view = BuckyballView({0.1f}, 0.01);
+  view.set_progressive(true);
+  view.mutable_camera()->mutable_eye()->set_y(3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok());
+  int64_t triangles = 0;
+  {
+    ProducerRig rig(FrameSettings{}, 1);
+    ASSERT_TRUE(rig.volume);
+    auto direct =
+        Extract(*rig.volume->prepared.hierarchy, rig.volume->prepared.grid_to_world, *request);
+    ASSERT_TRUE(direct.ok());
+    triangles = int64_t(direct->mesh.triangle_count());
+  }
+  ASSERT_GT(triangles, 100);
+  for (int64_t coarse : {triangles, triangles - 1}) {
+    FrameSettings settings;
+    settings.coarse_triangles = int(coarse);
+    settings.max_queued_chunks = 1000;  // the sink never drains
+    ProducerRig rig(settings, 1);
+    ASSERT_TRUE(rig.volume);
+    StuckSink sink;
+    ASSERT_TRUE(RunNow(rig, view, *request, &sink).ok());
+    const auto [coarse_n, refined_n] = CoarseAndRefinedTriangles(sink.chunks_);
+    EXPECT_EQ(refined_n, triangles);
+    if (coarse == triangles)
+      EXPECT_EQ(coarse_n, 0) << "a coarse frame of the frame itself";
+    else
+      EXPECT_GT(coarse_n, 0) << "coarse budget " << coarse;
+  }
+}
+
+// The coarse hint: a remembered eps is used for the same volume and isovalues only, never makes
+// the coarse frame finer than the requested one, and is forgotten when the frame it gave is far
+// from the coarse budget (the next coarse frame is searched for again, within the budget).
+TEST(FrameProducer, TheCoarseHintIsUsedOnlyWhereItFits) {
+  FrameSettings settings;
+  settings.coarse_triangles = 2000;
+  settings.max_queued_chunks = 1000;  // the sink never drains
+  ProducerRig rig(settings, 1);
+  ASSERT_TRUE(rig.volume);
+  ::isostream::v1::ViewRequest view = BuckyballView({0.1f}, 0.002);
+  view.set_progressive(true);
+  view.mutable_camera()->mutable_eye()->set_z(-3);
+  auto request = ToExtractRequest(view, Limits{}, 0);
+  ASSERT_TRUE(request.ok());
+  auto run = [&](CoarseHint* hint) {
+    std::atomic<bool> cancel{false};
+    StuckSink sink;
+    const auto now = std::chrono::steady_clock::now();
+    const absl::Status s =
+        rig.producer.Run(*rig.volume, view, *request, 1, &cancel, &sink, now, now, hint);
+    EXPECT_TRUE(s.ok()) << s;
+    return CoarseAndRefinedTriangles(sink.chunks_);
+  };
+  // A hint of other isovalues (eps 0: the whole mesh) is not taken: the coarse frame is searched.
+  CoarseHint other{"buckyball:65", {0.3f}, 0.0};
+  const auto [coarse_n, refined_n] = run(&other);
+  EXPECT_GT(refined_n, 4 * 2000) << "the frame must be well over the coarse budget";
+  EXPECT_GT(coarse_n, 0);
+  EXPECT_LE(coarse_n, 2000);
+  EXPECT_EQ(other.isovalues, std::vector<float>({0.1f}));
+  EXPECT_GE(other.eps, 0.0);
+
+  // A hint finer than the request (eps 0) draws the coarse frame at the request's eps, no finer;
+  // that frame, far over the coarse budget, makes the hint forgotten.
+  CoarseHint finer{"buckyball:65", {0.1f}, 0.0};
+  const auto [hinted_coarse, hinted_refined] = run(&finer);
+  EXPECT_EQ(hinted_refined, refined_n);
+  EXPECT_GT(hinted_coarse, 0);
+  EXPECT_LE(hinted_coarse, hinted_refined);
+  EXPECT_EQ(finer.eps, -1.0);
+  const auto [again_coarse, again_refined] = run(&finer);
+  EXPECT_GT(again_coarse, 0);
+  EXPECT_LE(again_coarse, 2000);
+  EXPECT_GE(finer.eps, 0.0);
+}
+
+// The wire request's fields as the extraction gets them, at the edges of the daemon's limits:
+// exactly max_isovalues surfaces are taken and one more refused, a budget of 0 is refused and one
+// over max_triangles is the limit, an orthographic view looks from the eye to the target, and
+// `unordered` and `normals` choose the order and the normal mode.
+TEST(ToExtractRequest, MapsEachFieldAndChecksTheLimitsAtTheirEdges) {
+  Limits limits;
+  limits.max_isovalues = 3;
+  limits.max_triangles = 5000;
+  ::isostream::v1::ViewRequest view = BuckyballView({0.1f, 0.2f, 0.3f}, 0.01);
+  auto three = ToExtractRequest(view, limits, 1);
+  ASSERT_TRUE(three.ok()) << three.status();
+  EXPECT_EQ(three->isovalues, std::vector<float>({0.1f, 0.2f, 0.3f}));
+  EXPECT_EQ(three->eps, 0.01);
+  EXPECT_EQ(three->budget, 0);
+  EXPECT_EQ(three->order, DrawOrder::kBackToFront);
+  EXPECT_EQ(three->normals, NormalMode::kSmooth);
+  view.add_surfaces()->set_isovalue(0.4f);
+  EXPECT_EQ(ToExtractRequest(view, limits, 1).status().code(),
+            absl::StatusCode::kResourceExhausted);
+
+  view = BuckyballView({0.1f}, 0.01);
+  view.set_triangle_budget(0);
+  EXPECT_EQ(ToExtractRequest(view, limits, 1).status().code(), absl::StatusCode::kInvalidArgument);
+  view.set_triangle_budget(-3);
+  EXPECT_EQ(ToExtractRequest(view, limits, 1).status().code(), absl::StatusCode::kInvalidArgument);
+  view.set_triangle_budget(4999);
+  EXPECT_EQ(ToExtractRequest(view, limits, 1)->budget, 4999);
+  view.set_triangle_budget(5001);
+  EXPECT_EQ(ToExtractRequest(view, limits, 1)->budget, 5000);
+
+  view = BuckyballView({0.1f}, 0.01);
+  auto* camera = view.mutable_camera();
+  camera->set_projection(::isostream::v1::ORTHOGRAPHIC);
+  camera->mutable_eye()->set_x(1);
+  camera->mutable_eye()->set_y(2);
+  camera->mutable_eye()->set_z(3);
+  camera->mutable_target()->set_x(-4);
+  camera->mutable_target()->set_y(7);
+  camera->mutable_target()->set_z(3.5);
+  view.set_unordered(true);
+  view.set_normals(::isostream::v1::FLAT);
+  auto ortho = ToExtractRequest(view, limits, 1);
+  ASSERT_TRUE(ortho.ok()) << ortho.status();
+  EXPECT_TRUE(ortho->view.orthographic);
+  EXPECT_EQ(ortho->view.direction, glm::dvec3(-5, 5, 0.5));
+  EXPECT_EQ(ortho->order, DrawOrder::kNone);
+  EXPECT_EQ(ortho->normals, NormalMode::kFlat);
+  camera->set_projection(::isostream::v1::PERSPECTIVE);
+  auto perspective = ToExtractRequest(view, limits, 1);
+  ASSERT_TRUE(perspective.ok()) << perspective.status();
+  EXPECT_FALSE(perspective->view.orthographic);
+  EXPECT_EQ(perspective->view.eye, glm::dvec3(1, 2, 3));
 }
 
 // A refused first chunk of a new frame must leave an unfinished frame able to

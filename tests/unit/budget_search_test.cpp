@@ -174,12 +174,14 @@ TEST(BudgetSearch, ExactOverFieldsIsovaluesAndBudgets) {
 }
 
 // A synthetic count function of the code, served to the search as passes would: the count at
-// the pass's code (or past the limit), and the curve up to its end.
+// the pass's code (or past the limit), and the curve up to its end. `codes` (if given) hears
+// of each pass's code.
 BudgetSearchResult Search(const std::function<int64_t(uint32_t)>& count_at, int64_t budget,
-                          uint32_t top) {
+                          uint32_t top, std::vector<uint32_t>* codes = nullptr) {
   const int64_t limit = 4 * budget;
   return FindBudgetCode(budget, limit, top,
                         [&](uint32_t code, CountCurve* curve) -> std::optional<int64_t> {
+                          if (codes) codes->push_back(code);
                           const int64_t n = count_at(code);
                           if (n > limit) return limit + 1;
                           if (!curve) return n;
@@ -228,6 +230,80 @@ TEST(BudgetSearch, FindsTheExactCodeOnSyntheticCounts) {
       EXPECT_LE(res.passes, 12) << name << " budget " << budget;
       EXPECT_FALSE(res.stopped);
     }
+}
+
+// A budget equal to a count is met by it ("at most"): at the top, and on the plateaus of
+// whole regions stopping at once, where a pass often lands on a code whose count is exactly the
+// budget.
+TEST(BudgetSearch, ABudgetEqualToACountFitsIt) {
+  const uint32_t top = 0x4000;
+  auto steps = [](uint32_t k) { return int64_t(1) << std::clamp(int(0x4000 - k) / 300, 0, 40); };
+  auto power = [](uint32_t k) { return int64_t(50 + 1e3 / std::max(EtaCodeEps(k), 1e-12)); };
+  for (const auto& f :
+       {std::function<int64_t(uint32_t)>(steps), std::function<int64_t(uint32_t)>(power)})
+    for (uint32_t at : {top, top - 1, top - 700, top - 2000, top - 5000, 0x2000u, 0x1000u}) {
+      const int64_t budget = f(at);
+      const BudgetSearchResult res = Search(f, budget, top);
+      const uint32_t want = BruteForce(f, budget, top);
+      EXPECT_EQ(res.code, want) << "budget " << budget << " = count at " << at;
+      ASSERT_TRUE(res.count.has_value()) << "budget " << budget;
+      EXPECT_EQ(*res.count, budget);
+    }
+}
+
+// Each pass counts a code no earlier pass counted: a repeated one shows nothing new. Over the
+// shapes and budgets above, and with the coarsest count close to the budget (the first probe's
+// aim, a sixteenth of the budget, then lies above the top).
+TEST(BudgetSearch, NoCodeIsCountedTwice) {
+  const uint32_t top = 0x4000;
+  std::vector<std::function<int64_t(uint32_t)>> shapes = {
+      [](uint32_t k) { return int64_t(50 + 1e3 / std::max(EtaCodeEps(k), 1e-12)); },
+      [](uint32_t k) { return k >= 0x2000 ? int64_t(30) : int64_t(5'000'000); },
+      [](uint32_t k) { return int64_t(1) << std::clamp(int(0x4000 - k) / 300, 0, 40); },
+  };
+  for (size_t i = 0; i < shapes.size(); ++i)
+    for (int64_t budget : {int64_t{31}, int64_t{60}, int64_t{1000}, int64_t{123456}}) {
+      std::vector<uint32_t> codes;
+      Search(shapes[i], budget, top, &codes);
+      std::vector<uint32_t> sorted = codes;
+      std::sort(sorted.begin(), sorted.end());
+      EXPECT_EQ(std::adjacent_find(sorted.begin(), sorted.end()), sorted.end())
+          << "shape " << i << " budget " << budget << ": " << ::testing::PrintToString(codes);
+    }
+}
+
+// Counts that defeat the aim: one that barely changes with eps (linear in the code, so its slope
+// over log eps is nearly flat) and a cliff from ~1e9 down to a shallow ramp. Aiming fails
+// several times; bisecting the codes after that still ends at the exact code, within 8 aimed
+// passes and 16 more (2^15 codes).
+TEST(BudgetSearch, EndsExactlyWhereAimingFails) {
+  const uint32_t top = 0x4000;
+  auto shallow = [](uint32_t k) { return int64_t(1e6 / (1 + 0.001 * k)); };
+  auto cliff = [](uint32_t k) {
+    return k < 0x3000 ? int64_t(1e9 / (1 + k)) : int64_t(100 + (0x4000 - k));
+  };
+  int bisected = 0;
+  for (const auto& [f, budgets] :
+       {std::pair<std::function<int64_t(uint32_t)>, std::vector<int64_t>>{
+            shallow, {224185, 784647, 2746264}},
+        {cliff, {5229, 18301, 224185, 784647, 2746264}}})
+    for (int64_t budget : budgets) {
+      const BudgetSearchResult res = Search(f, budget, top);
+      EXPECT_EQ(res.code, BruteForce(f, budget, top)) << "budget " << budget;
+      EXPECT_LE(res.passes, 8 + 16) << "budget " << budget;
+      bisected += res.passes > 9;
+    }
+  EXPECT_GT(bisected, 0) << "aiming never failed long enough to bisect: nothing tested";
+}
+
+// A count the same at every code (no node stops above the finest level): the pass at the top
+// shows it, and the answer is code 0 after that one pass.
+TEST(BudgetSearch, ACountThatNeverChangesTakesOnePass) {
+  const BudgetSearchResult res = Search([](uint32_t) { return int64_t(7); }, 10, 0x4000);
+  EXPECT_EQ(res.code, 0u);
+  ASSERT_TRUE(res.count.has_value());
+  EXPECT_EQ(*res.count, 7);
+  EXPECT_EQ(res.passes, 1);
 }
 
 TEST(BudgetSearch, NothingFitsEverythingFitsAndAStoppedPass) {

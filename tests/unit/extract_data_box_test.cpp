@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "mesh_test_meshes.h"
+#include "server/extract/data_box_clip.h"
 #include "server/extract/extractor.h"
 #include "server/hierarchy/prepared_volume.h"
 #include "shared/mesh_validate.h"
@@ -114,6 +115,35 @@ void ExpectCleanMesh(const OrderedMesh& m, const RawVolume& raw, const GridToWor
   EXPECT_EQ(coincident, 0u) << what;
   EXPECT_EQ(outside, 0u) << what;
   EXPECT_EQ(bad_normals, 0u) << what;
+}
+
+// The clipping itself: a crossing of the box's face between ends with opposite normals (their
+// blend is zero) takes the normal of the end inside the box, never that of the end outside it;
+// elsewhere the blend, normalized. The crossings are on the face exactly, and made by the clip.
+TEST(ExtractDataBox, AClippedCrossingTakesItsNormalFromInside) {
+  using extract_internal::ClipVertex;
+  extract_internal::Context c;
+  c.world_origin = glm::vec3(0.0f);
+  c.world_spacing = glm::vec3(1.0f);
+  c.data_max = glm::ivec3(4, 8, 8);  // the face x = 4
+  ClipVertex poly[9] = {{glm::vec3(3, 1, 1), glm::dvec3(1, 0, 0), 0},
+                        {glm::vec3(5, 1, 1), glm::dvec3(-1, 0, 0), 1},
+                        {glm::vec3(3, 3, 1), glm::dvec3(0, 1, 0), 2}};
+  ASSERT_EQ(extract_internal::ClipToDataBox(c, poly, 3), 4);
+  int made = 0;
+  for (int i = 0; i < 4; ++i) {
+    if (poly[i].id != EdgeVertexTable::kMissing) continue;
+    ++made;
+    EXPECT_EQ(poly[i].p.x, 4.0f);
+    if (poly[i].p == glm::vec3(4, 1, 1)) {
+      EXPECT_EQ(poly[i].n, glm::dvec3(1, 0, 0));  // opposite ends: the inside one's
+    } else {
+      EXPECT_EQ(poly[i].p, glm::vec3(4, 2, 1));
+      EXPECT_NEAR(poly[i].n.x, -std::sqrt(0.5), 1e-12);
+      EXPECT_NEAR(poly[i].n.y, std::sqrt(0.5), 1e-12);
+    }
+  }
+  EXPECT_EQ(made, 2);
 }
 
 // The surfaces are closed but where the data box cuts them: every half-edge has its reverse in

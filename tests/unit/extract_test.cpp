@@ -466,9 +466,10 @@ TEST(Extract, SameOutputForOneAndTwoThreadsAndForOrderNoneAsASet) {
 }
 
 // An eye ever farther away along -d orders every separating plane as the view direction d
-// does: perspective at 1e6 (integer plane tests near the eye's side), 1e30 (past the +-2^40
-// clamp) and 1e300 must draw exactly what orthographic along d draws. d is generic: no plane
-// normal (axis or face diagonal) is perpendicular to it.
+// does: perspective at 1e6 (integer plane tests near the eye's side), 1e13 and 1e15 (plane sides
+// past the +-2^40 clamp, on both sides, the eye still seen in perspective), 1e17 and 1e30 (past
+// 2^52: seen from infinity) and 1e300 must draw exactly what orthographic along d draws. d is
+// generic: no plane normal (axis or face diagonal) is perpendicular to it.
 TEST(Extract, FarPerspectiveEyeDrawsAsOrthographic) {
   const auto h = MakeHierarchy(5, CayleyField);
   const glm::dvec3 d = glm::normalize(glm::dvec3(0.31, -0.52, 0.79));
@@ -477,7 +478,7 @@ TEST(Extract, FarPerspectiveEyeDrawsAsOrthographic) {
   ortho.view.direction = d;
   const auto want = RunExtract(*h, ortho);
   ASSERT_GT(want.mesh.triangle_count(), 1000u);
-  for (double far : {1e6, 1e30, 1e300}) {
+  for (double far : {1e6, 1e13, 1e15, 1e17, 1e30, 1e300}) {
     const auto got = RunExtract(*h, Request({0.0f}, 0.004, glm::dvec3(16.0) - far * d));
     EXPECT_EQ(got.mesh.triangles, want.mesh.triangles) << far;
     EXPECT_EQ(got.mesh.positions, want.mesh.positions) << far;
@@ -493,6 +494,32 @@ TEST(Extract, FarPerspectiveEyeDrawsAsOrthographic) {
   fine.spacing = glm::dvec3(1.0 / 32);
   const auto huge = RunExtract(*h, Request({0.0f}, 0.004, -1e307 * d), fine);
   EXPECT_EQ(huge.mesh.triangles, RunExtract(*h, ortho, fine).mesh.triangles);
+}
+
+// An orthographic view is ordered by its direction however far the grid lies from the world's
+// origin (here 1e17 grid steps: the eye position an orthographic view leaves at the origin
+// would be past 2^52 of them): the opposite direction draws in another order, and each
+// direction as it does for a grid at the origin.
+TEST(Extract, OrthographicOrderFollowsTheDirectionForAGridFarFromTheOrigin) {
+  const auto h = MakeHierarchy(5, CayleyField);
+  const glm::dvec3 d = glm::normalize(glm::dvec3(0.31, -0.52, 0.79));
+  GridToWorld far;
+  far.origin = glm::dvec3(1e17, -1e17, 1e17);
+  GridToWorld near;
+  near.origin = glm::dvec3(1, -1, 1);
+  std::vector<std::vector<uint32_t>> orders;
+  for (const glm::dvec3& dir : {d, -d}) {
+    ExtractRequest ortho = Request({0.0f}, 0.004, {0, 0, 0});
+    ortho.view.orthographic = true;
+    ortho.view.direction = dir;
+    const auto at_origin = RunExtract(*h, ortho, near);
+    const auto far_away = RunExtract(*h, ortho, far);
+    ASSERT_GT(at_origin.mesh.triangle_count(), 1000u);
+    EXPECT_EQ(far_away.mesh.triangle_count(), at_origin.mesh.triangle_count());
+    EXPECT_EQ(far_away.mesh.surface, at_origin.mesh.surface);
+    orders.push_back(far_away.mesh.triangles);
+  }
+  EXPECT_NE(orders[0], orders[1]);
 }
 
 TEST(Extract, BudgetFindsTheSmallestEpsThatFits) {

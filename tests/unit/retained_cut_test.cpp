@@ -131,6 +131,9 @@ TEST(RetainedCut, ReorderedForAnotherViewEqualsAFreshExtraction) {
             EXPECT_TRUE(reordered->stats.reordered);
             EXPECT_EQ(reordered->stats.eps_used, fresh->stats.eps_used);
             EXPECT_EQ(reordered->stats.triangles_per_surface, fresh->stats.triangles_per_surface);
+            // Leaves with triangles are the mesh's, whatever the view; the walk visits records.
+            EXPECT_EQ(reordered->stats.leaves, fresh->stats.leaves);
+            EXPECT_GT(reordered->stats.tets_visited, 0);
             ExpectSameDrawing(fresh->mesh, reordered->mesh,
                               vol.name + " eps " + std::to_string(eps) + " view " +
                                   std::to_string(compared % views.size()));
@@ -227,6 +230,10 @@ TEST(RetainedCut, ServesOnlyTheSameMesh) {
   other.budget = 500;
   EXPECT_FALSE(cut.Serves(other));
   EXPECT_TRUE(cut.Serves(other, 0.01));  // a budget whose remembered eps is the cut's
+  // ... but a remembered eps says nothing of a request for another eps.
+  ExtractRequest other_eps = r;
+  other_eps.eps = 0.02;
+  EXPECT_FALSE(cut.Serves(other_eps, 0.01));
   // ... for the same surfaces only: a session alternating isovalue sets under a budget the
   // whole mesh fits (eps 0 for both) must not be served the other set's mesh.
   other.isovalues = {0.7f, 0.5f};
@@ -295,6 +302,15 @@ TEST(RetainedCut, ServesOnlyOnceItKeepsTheFrameItRecorded) {
   EXPECT_FALSE(cut.KeepMesh(std::move(shorter)));
   EXPECT_FALSE(cut.Serves(r));
   EXPECT_FALSE(cut.KeepMesh(OrderedMesh(first->mesh)));  // cleared: nothing recorded now
+
+  // Nor one with the recorded triangles on other vertices (one more, unused).
+  auto recorded = Extract(*h, GridToWorld{}, r, nullptr, &cut);
+  ASSERT_TRUE(recorded.ok());
+  OrderedMesh more_vertices = recorded->mesh;
+  more_vertices.positions.insert(more_vertices.positions.end(), {0.0f, 0.0f, 0.0f});
+  more_vertices.normals.insert(more_vertices.normals.end(), {0.0f, 0.0f, 1.0f});
+  EXPECT_FALSE(cut.KeepMesh(std::move(more_vertices)));
+  EXPECT_FALSE(cut.Serves(r));
 
   auto second = Extract(*h, GridToWorld{}, r, nullptr, &cut);
   ASSERT_TRUE(second.ok());
