@@ -3,6 +3,7 @@
 // client/render/opengl/, so callers see only this class.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -17,12 +18,17 @@ enum class EglPlatform {
   kDevice,       // EGL_EXT_platform_device only (GPU drivers without Mesa)
 };
 
+inline constexpr int64_t kMaxSamplesInAll = int64_t{1} << 28;  // 1 GiB of RGBA8 samples
+
 struct HeadlessContextOptions {
   int width = 512;  // framebuffer size in pixels, 1..16384 (and at most the GL's limit)
   int height = 512;
   // The renderer relies on draw order, not depth, so a depth buffer is only for callers that
   // draw opaque geometry of their own.
   bool depth_buffer = false;
+  // Multisample anti-aliasing: samples per pixel (1: none). Fewer where the GL offers fewer, and
+  // 1 where the samples would pass kMaxSamplesInAll (a 16384^2 picture at 4 would take 4 GiB).
+  int samples = 1;
   EglPlatform platform = EglPlatform::kAuto;
   int device_index = -1;  // kDevice / kAuto: which EGL device; -1 tries each in turn
 };

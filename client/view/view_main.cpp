@@ -48,6 +48,7 @@ struct Args {
   int64_t budget = -1;
   std::string eye;
   std::string up = "0,1,0";
+  int samples = 4;
   std::string size = "800x800";
   std::string output;
   std::string token;
@@ -326,6 +327,7 @@ int Run(const Args& args) {
   render::HeadlessContextOptions ctx_options;
   ctx_options.width = width;
   ctx_options.height = height;
+  ctx_options.samples = args.samples;
   auto context = render::HeadlessContext::Create(ctx_options);
   if (!context.ok()) return Fail(context.status());
   auto renderer = render::MeshRenderer::Create();
@@ -340,6 +342,7 @@ int Run(const Args& args) {
     window.state = state;
     window.camera = camera;
     window.world_up = base.up;
+    window.samples = args.samples;
     window.value_range = value_range;
     window.scene_radius = 0.5f * render::LengthOf(hi - lo);
     window.exit_after_frames = args.exit_after_frames;
@@ -424,6 +427,10 @@ int main(int argc, char** argv) {
   auto* budget = app.add_option("--budget", args.budget, "triangle budget")
                      ->transform(isostream::GivenCount());
   eps->excludes(budget);
+  app.add_option("--samples", args.samples,
+                 "anti-aliasing: samples per pixel (default 4; 1: none; fewer where the GL or "
+                 "the picture's size allows fewer)")
+      ->check(CLI::Range(1, 16));
   app.add_option("--up", args.up,
                  "the picture's vertical x,y,z: the default view stands on it, --orbit and the "
                  "window's drag turn about it (default 0,1,0)");

@@ -153,8 +153,13 @@ absl::Status RunWindow(net::Client& client, const WindowOptions& options) {
   glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
   // EGL, like the headless path: GLVND's libOpenGL then dispatches the renderer's calls.
   glfwWindowHint(GLFW_CONTEXT_CREATION_API, GLFW_EGL_CONTEXT_API);
+  glfwWindowHint(GLFW_SAMPLES, options.samples > 1 ? options.samples : 0);
   GLFWwindow* window =
       glfwCreateWindow(options.width, options.height, "isostream-view", nullptr, nullptr);
+  if (!window && options.samples > 1) {  // a display without multisampled configs: without
+    glfwWindowHint(GLFW_SAMPLES, 0);
+    window = glfwCreateWindow(options.width, options.height, "isostream-view", nullptr, nullptr);
+  }
   if (!window)
     return absl::UnavailableError("cannot open a GL 3.3 core window (GLFW: " + g_glfw_error + ")");
   glfwMakeContextCurrent(window);

@@ -18,6 +18,7 @@ struct WindowOptions {
   ViewState state;
   render::Camera camera;        // initial eye and target; orbiting keeps the target
   glm::vec3 world_up{0, 1, 0};  // the vertical (--up): orbits turn about it
+  int samples = 4;              // multisample anti-aliasing (--samples), where the display has it
   double value_range = 1;       // max - min of the volume, for the isovalue keys
   float scene_radius = 1;       // of the volume's bounding sphere: near and far follow the zoom
   // For tests and scripts: close after this many refined frames have been shown, writing a

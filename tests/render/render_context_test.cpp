@@ -2,6 +2,7 @@
 // contexts alive at once, and statuses (not crashes) for the ways creation can fail.
 #include <gtest/gtest.h>
 
+#include <set>
 #include <string>
 
 #include "client/render/headless_context.h"
@@ -49,6 +50,47 @@ TEST(HeadlessContextTest, CreatesWithoutADisplayServer) {
       EXPECT_EQ(p[3], 255);
     }
   }
+}
+
+// How many distinct colours a picture of one opaque, flat-lit triangle over a background holds.
+size_t ColoursOfATriangle(int samples) {
+  HeadlessContextOptions options = Size(64, 64);
+  options.samples = samples;
+  auto context = HeadlessContext::Create(options);
+  EXPECT_TRUE(context.ok()) << context.status();
+  if (!context.ok()) return 0;
+  auto renderer = MeshRenderer::Create();
+  EXPECT_TRUE(renderer.ok()) << renderer.status();
+  if (!renderer.ok()) return 0;
+  Palette palette = (*renderer)->palette();
+  palette[0].opacity = 1.0f;
+  (*renderer)->SetPalette(palette);
+  OrderedMesh mesh;  // a slanted triangle facing the eye: its edges cross pixels at all angles
+  mesh.positions = {-0.9f, -0.8f, 0.0f, 0.85f, -0.3f, 0.0f, -0.2f, 0.9f, 0.0f};
+  mesh.normals = {0, 0, 1, 0, 0, 1, 0, 0, 1};
+  mesh.triangles = {0, 1, 2};
+  mesh.surface = {0};
+  (*renderer)->BeginFrame();
+  EXPECT_TRUE((*renderer)->AddChunk(mesh).ok());
+  EXPECT_TRUE((*renderer)->EndFrame().ok());
+  Camera camera;  // the eye on +z looking at the origin; orthographic: one shade for the face
+  camera.projection = Projection::kOrthographic;
+  EXPECT_TRUE((*renderer)->Render(camera).ok());
+  const absl::StatusOr<Image> image = (*context)->ReadPixels();
+  EXPECT_TRUE(image.ok()) << image.status();
+  if (!image.ok()) return 0;
+  std::set<uint32_t> colours;
+  for (size_t i = 0; i < image->rgba.size(); i += 4)
+    colours.insert(uint32_t(image->rgba[i]) << 16 | uint32_t(image->rgba[i + 1]) << 8 |
+                   image->rgba[i + 2]);
+  return colours.size();
+}
+
+// Multisampling blends the pixels an edge crosses: without it a flat triangle over a background
+// is two colours; with 4 samples its edges add the shades between (the viewer's --samples).
+TEST(HeadlessContextTest, MultisamplingSmoothsEdges) {
+  EXPECT_EQ(ColoursOfATriangle(1), 2u);
+  EXPECT_GE(ColoursOfATriangle(4), 4u);
 }
 
 TEST(HeadlessContextTest, ResizeChangesTheReadback) {

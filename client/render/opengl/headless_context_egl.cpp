@@ -6,6 +6,7 @@
 #include <absl/strings/str_cat.h>
 #include <absl/strings/str_split.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <vector>
@@ -202,12 +203,16 @@ absl::StatusOr<Opened> OpenDevice(const char* client_extensions, int device_inde
 struct HeadlessContext::Impl {
   EGLDisplay display = EGL_NO_DISPLAY;
   EGLContext context = EGL_NO_CONTEXT;
-  gl::Framebuffer framebuffer;
+  gl::Framebuffer framebuffer;  // what every draw goes to: multisampled when samples > 1
   gl::Renderbuffer color;
   gl::Renderbuffer depth;
+  gl::Framebuffer resolved;  // samples > 1: the picture the samples resolve into, to be read
+  gl::Renderbuffer resolved_color;
   int width = 0;
   int height = 0;
   bool with_depth = false;
+  int asked_samples = 1;
+  int samples = 1;  // in use for the current size
   std::string renderer_name;
   std::string platform_name;
 
@@ -220,6 +225,8 @@ struct HeadlessContext::Impl {
     framebuffer.reset();
     color.reset();
     depth.reset();
+    resolved.reset();
+    resolved_color.reset();
     eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
     eglDestroyContext(display, context);
   }
@@ -236,24 +243,45 @@ struct HeadlessContext::Impl {
       return absl::InvalidArgumentError(absl::StrCat(
           "framebuffer size ", w, "x", h, " exceeds this GL's limit of ", max_renderbuffer));
     }
+    GLint max_samples = 1;
+    glGetIntegerv(GL_MAX_SAMPLES, &max_samples);
+    samples = std::max(1, std::min(asked_samples, int(max_samples)));
+    if (int64_t{w} * h * samples > kMaxSamplesInAll) samples = 1;
+    // Storage of `format` for `buffer`, multisampled when samples > 1.
+    auto store = [&](const gl::Renderbuffer& buffer, GLenum format, int count) {
+      glBindRenderbuffer(GL_RENDERBUFFER, buffer.get());
+      if (count > 1)
+        glRenderbufferStorageMultisample(GL_RENDERBUFFER, count, format, w, h);
+      else
+        glRenderbufferStorage(GL_RENDERBUFFER, format, w, h);
+    };
+    auto complete = [](const char* which) {
+      const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+      if (status == GL_FRAMEBUFFER_COMPLETE) return absl::OkStatus();
+      return absl::InternalError(absl::StrCat(
+          "offscreen ", which, " framebuffer incomplete (status 0x", absl::Hex(status), ")"));
+    };
     if (!framebuffer) framebuffer = gl::Framebuffer::Make();
     if (!color) color = gl::Renderbuffer::Make();
     glBindFramebuffer(GL_FRAMEBUFFER, framebuffer.get());
-    glBindRenderbuffer(GL_RENDERBUFFER, color.get());
-    glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, w, h);
+    store(color, GL_RGBA8, samples);
     glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, color.get());
     if (with_depth) {
       if (!depth) depth = gl::Renderbuffer::Make();
-      glBindRenderbuffer(GL_RENDERBUFFER, depth.get());
-      glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, w, h);
+      store(depth, GL_DEPTH_COMPONENT24, samples);
       glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth.get());
     }
-    glBindRenderbuffer(GL_RENDERBUFFER, 0);
-    const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
-    if (status != GL_FRAMEBUFFER_COMPLETE) {
-      return absl::InternalError(
-          absl::StrCat("offscreen framebuffer incomplete (status 0x", absl::Hex(status), ")"));
+    ISOSTREAM_RETURN_IF_ERROR(complete("drawing"));
+    if (samples > 1) {
+      if (!resolved) resolved = gl::Framebuffer::Make();
+      if (!resolved_color) resolved_color = gl::Renderbuffer::Make();
+      glBindFramebuffer(GL_FRAMEBUFFER, resolved.get());
+      store(resolved_color, GL_RGBA8, 1);
+      glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER,
+                                resolved_color.get());
+      ISOSTREAM_RETURN_IF_ERROR(complete("resolving"));
     }
+    glBindRenderbuffer(GL_RENDERBUFFER, 0);
     width = w;
     height = h;
     Bind();
@@ -270,6 +298,7 @@ absl::StatusOr<std::unique_ptr<HeadlessContext>> HeadlessContext::Create(
   const char* client_extensions = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
   auto impl = std::make_unique<Impl>();
   impl->with_depth = options.depth_buffer;
+  impl->asked_samples = options.samples;
 
   std::string reasons;
   absl::StatusOr<Opened> opened = absl::UnavailableError("no platform tried");
@@ -326,7 +355,16 @@ absl::StatusOr<Image> HeadlessContext::ReadPixels() {
   image.width = impl_->width;
   image.height = impl_->height;
   image.rgba.resize(4 * size_t(image.width) * size_t(image.height));
-  glBindFramebuffer(GL_READ_FRAMEBUFFER, impl_->framebuffer.get());
+  if (impl_->samples > 1) {  // each pixel's samples averaged into the picture read below
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, impl_->framebuffer.get());
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, impl_->resolved.get());
+    glBlitFramebuffer(0, 0, image.width, image.height, 0, 0, image.width, image.height,
+                      GL_COLOR_BUFFER_BIT, GL_NEAREST);
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, impl_->framebuffer.get());
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, impl_->resolved.get());
+  } else {
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, impl_->framebuffer.get());
+  }
   glReadBuffer(GL_COLOR_ATTACHMENT0);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadPixels(0, 0, image.width, image.height, GL_RGBA, GL_UNSIGNED_BYTE, image.rgba.data());
