@@ -1,6 +1,9 @@
 #include "client/net/session_client.h"
 
+#include <grpc/support/log.h>
+
 #include <condition_variable>
+#include <cstdlib>
 #include <mutex>
 #include <thread>
 
@@ -25,6 +28,10 @@ absl::StatusOr<std::string> ReadTlsCa(const std::string& path) {
   if (pem->find("-----BEGIN CERTIFICATE-----") == std::string::npos)
     return absl::InvalidArgumentError("--tls-ca '" + path + "' holds no certificates (PEM)");
   return std::move(*pem);
+}
+
+void QuietGrpcLogs() {
+  if (std::getenv("GRPC_VERBOSITY") == nullptr) gpr_set_log_function([](gpr_log_func_args*) {});
 }
 
 std::string ExplainCallError(const absl::Status& s, const ClientOptions& options) {

@@ -51,6 +51,11 @@ absl::StatusOr<std::string> ReadTlsCa(const std::string& path);
 // names the address and whether TLS was used (a TLS mismatch also reads "failed to connect").
 std::string ExplainCallError(const absl::Status& status, const ClientOptions& options);
 
+// For a client program's main: gRPC's own log lines (a failed TLS handshake's "E1127 ...
+// Handshake failed ...") go nowhere, since ExplainCallError says the same with what to do;
+// GRPC_VERBOSITY set in the environment keeps them, for debugging.
+void QuietGrpcLogs();
+
 // gRPC status -> absl status (the codes share their numbering).
 absl::Status FromGrpc(const grpc::Status& status);
 

@@ -412,6 +412,7 @@ int Run(const Args& args) {
 
 int main(int argc, char** argv) {
   isostream::KeepFreedMemoryForReuse();  // each chunk's decode buffers reuse the last one's
+  isostream::net::QuietGrpcLogs();
   isostream::view::Args args;
   CLI::App app{
       "isostream-view: draw isostreamd's view-ordered transparent isosurfaces (headless, PNG)"};

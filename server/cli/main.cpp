@@ -2,6 +2,7 @@
 #include <exception>
 #include <new>
 
+#include "client/net/session_client.h"
 #include "server/cli/commands.h"
 #include "shared/file_io.h"
 #include "shared/malloc_tuning.h"
@@ -9,6 +10,7 @@
 int main(int argc, char** argv) {
   // fetch decodes chunk after chunk, extract fills subtree buffers: both reuse freed memory.
   isostream::KeepFreedMemoryForReuse();
+  isostream::net::QuietGrpcLogs();  // fetch, volumes and stats explain their failures
   CLI::App app{"isostream: multiresolution transparent isosurfaces (Gerstner's method)"};
   app.require_subcommand(1);
   int exit_code = 0;

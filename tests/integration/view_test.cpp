@@ -465,6 +465,19 @@ TEST(View, ConnectsOverTlsWithItsCa) {
   const ViewRun plain = View(common + " --timeout-s 5");
   EXPECT_NE(plain.code, 0);
   EXPECT_NE(plain.output.find("--tls-ca"), std::string::npos) << plain.output;
+  // The other mismatch, TLS to a plaintext daemon: explained once, without gRPC's own line
+  // ("E1127 ... Handshake failed ..."), which said the same.
+  testing::DaemonProcess plaintext;
+  ASSERT_TRUE(plaintext.Start({"--no-cache"}, dir.path() + "/plaintext.log"));
+  const ViewRun tls_to_plain =
+      View("--server " + plaintext.address() + " --volume sphere:33 --iso 0.5 --size 64x64 -o " +
+           png + " --timeout-s 5 --tls-ca " + cert);
+  EXPECT_EQ(tls_to_plain.code, 1);
+  EXPECT_NE(tls_to_plain.output.find("connected with TLS"), std::string::npos)
+      << tls_to_plain.output;
+  EXPECT_EQ(tls_to_plain.output.find("ssl_transport_security"), std::string::npos)
+      << tls_to_plain.output;
+  EXPECT_EQ(plaintext.Stop(), 0);
 
   const std::string empty = dir.path() + "/empty.pem";
   std::ofstream(empty).close();
