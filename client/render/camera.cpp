@@ -121,14 +121,20 @@ Camera FrameBox(const glm::vec3& lo, const glm::vec3& hi, const glm::vec3& direc
 }
 
 std::vector<Camera> OrbitCameras(const Camera& base, int count) {
+  return OrbitCameras(base, count, base.up);
+}
+
+std::vector<Camera> OrbitCameras(const Camera& base, int count, const glm::vec3& vertical) {
   std::vector<Camera> out;
   if (count <= 0) return out;
   out.reserve(count);
-  const glm::vec3 axis = glm::normalize(base.up);
+  const glm::vec3 axis = glm::normalize(vertical);
   for (int i = 0; i < count; ++i) {
     const float angle = glm::two_pi<float>() * float(i) / float(count);
     Camera c = base;
     c.eye = base.target + glm::angleAxis(angle, axis) * (base.eye - base.target);
+    // The view's own up where it is not parallel to the vertical, else one that is.
+    c.up = i == 0 ? base.up : UsableUp(c.target - c.eye, vertical);
     out.push_back(c);
   }
   return out;

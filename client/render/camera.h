@@ -78,5 +78,8 @@ Camera FrameBox(const glm::vec3& lo, const glm::vec3& hi, const glm::vec3& direc
 // starting at base itself (element 0 equals base). Distance to the target, height along the
 // axis and all other fields are kept. count <= 0 gives an empty vector.
 std::vector<Camera> OrbitCameras(const Camera& base, int count);
+// The same about the axis `vertical` (the viewer's --up), which base.up may not be (a view along
+// the vertical takes another up): each camera's up is a usable one for its own view.
+std::vector<Camera> OrbitCameras(const Camera& base, int count, const glm::vec3& vertical);
 
 }  // namespace isostream::render

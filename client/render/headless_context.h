@@ -27,7 +27,8 @@ struct HeadlessContextOptions {
   // draw opaque geometry of their own.
   bool depth_buffer = false;
   // Multisample anti-aliasing: samples per pixel (1: none). Fewer where the GL offers fewer, and
-  // 1 where the samples would pass kMaxSamplesInAll (a 16384^2 picture at 4 would take 4 GiB).
+  // halved until all the samples (depth's too) fit kMaxSamplesInAll (a 16384^2 picture at 4
+  // would take 4 GiB: it gets 1).
   int samples = 1;
   EglPlatform platform = EglPlatform::kAuto;
   int device_index = -1;  // kDevice / kAuto: which EGL device; -1 tries each in turn

@@ -357,9 +357,9 @@ int Run(const Args& args) {
 
   auto session = (*client)->OpenSession();
   if (!session.ok()) return call_failed(session.status());
-  const std::vector<render::Camera> cameras = args.orbit > 0
-                                                  ? render::OrbitCameras(camera, args.orbit)
-                                                  : std::vector<render::Camera>{camera};
+  const std::vector<render::Camera> cameras =
+      args.orbit > 0 ? render::OrbitCameras(camera, args.orbit, base.up)
+                     : std::vector<render::Camera>{camera};
   for (size_t i = 0; i < cameras.size(); ++i) {
     const render::Camera& cam = cameras[i];
     const pb::ViewRequest view = MakeViewRequest(state, cam, palette, i + 1);

@@ -21,6 +21,7 @@ namespace {
 namespace pb = ::isostream::v1;
 
 struct FetchArgs {
+  FetchArgs() { connection.timeout_means = "--timeout-s bounds each call, a whole frame included"; }
   ConnectionArgs connection;
   std::string volume;
   ViewArgs view;

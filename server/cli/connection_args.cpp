@@ -17,6 +17,7 @@ absl::StatusOr<std::unique_ptr<net::Client>> ConnectTo(const ConnectionArgs& arg
   options->address = args.server;
   options->token = args.token;
   options->call_timeout = std::chrono::seconds(args.timeout_s);
+  options->call_timeout_means = args.timeout_means;
   if (!args.tls_ca.empty()) {
     auto pem = net::ReadTlsCa(args.tls_ca);
     if (!pem.ok()) return pem.status();

@@ -16,6 +16,8 @@ struct ConnectionArgs {
   std::string token;
   std::string tls_ca;
   int timeout_s = 60;
+  // What --timeout-s bounds, for the message of a call past it (ClientOptions).
+  std::string timeout_means = "--timeout-s bounds each call";
 };
 
 // --server, --token, --tls-ca and --timeout-s; `timeout_means` is --timeout-s's help.

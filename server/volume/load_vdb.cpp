@@ -211,10 +211,15 @@ absl::StatusOr<VolumePtr> LoadVdbOpenFile(int fd, const std::string& spec, const
   // class is its active box, as dense data (a scan, a simulation's domain) are: a margin of
   // background would add a surface on the box's faces, and move a 1024^3 grid past the 1025^3
   // cube.
-  if (grid->getGridClass() == openvdb::GRID_LEVEL_SET ||
-      grid->getGridClass() == openvdb::GRID_FOG_VOLUME)
-    box.expand(1);
+  // The limits are the data's: a grid that fits them without the margin loads without it
+  // (a 4096-wide level set would be refused as 4098 wide, dims the user never made).
   ISOSTREAM_RETURN_IF_ERROR(CheckDims(BoxDims(box), limits, where));
+  if (grid->getGridClass() == openvdb::GRID_LEVEL_SET ||
+      grid->getGridClass() == openvdb::GRID_FOG_VOLUME) {
+    openvdb::CoordBBox wider = box;
+    wider.expand(1);
+    if (CheckDims(BoxDims(wider), limits, where).ok()) box = wider;
+  }
 
   // Samples sit on an axis-aligned lattice downstream: scale + translate maps load, with axes
   // reversed or swapped (turned onto the world's, orientation.h); rotated ones do not.

@@ -79,6 +79,11 @@ size_t ColoursOfATriangle(int samples) {
   const absl::StatusOr<Image> image = (*context)->ReadPixels();
   EXPECT_TRUE(image.ok()) << image.status();
   if (!image.ok()) return 0;
+  // Reading resolved the samples elsewhere, and left reads and draws on the drawing buffer.
+  GLint read = -1, draw = -2;
+  glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &read);
+  glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &draw);
+  EXPECT_EQ(read, draw) << samples << " samples";
   std::set<uint32_t> colours;
   for (size_t i = 0; i < image->rgba.size(); i += 4)
     colours.insert(uint32_t(image->rgba[i]) << 16 | uint32_t(image->rgba[i + 1]) << 8 |

@@ -1,7 +1,8 @@
 // QuantizationFor: the box and bit count of a volume's compressed positions (the daemon's
 // frames, the CLI's .glb), for every placement the loaders accept (each spacing in
 // [1e-30, 1e30] world units): within 1/64 of the smallest spacing of the exact positions, plus
-// the float rounding any float position has. An absolute margin around the box once made every
+// the float arithmetic's few steps of the box's size and distance from the origin
+// (PositionErrorBound). An absolute margin around the box once made every
 // vertex of a volume with spacing 1e-25 decode to one point, and 24 bits at most could not step
 // a volume with spacings 1e20 and 1e-20 (found by adversarial testing).
 #include "server/volume/quantization.h"
@@ -41,6 +42,9 @@ const Placement kPlacements[] = {
     {"spacings 1e20, 1e-20, 1", {20, 24, 28}, {1e20, 1e-20, 1}, {0, 0, 0}},
     {"spacings 10 and 0.001 over 4096 samples", {4096, 2, 2}, {10, 0.001, 0.001}, {0, 0, 0}},
     {"map coordinates", {257, 257, 65}, {10, 10, 2}, {512000, 4100000, -300}},
+    {"a box far from the origin", {129, 129, 129}, {1, 1, 1}, {-20000, 3, 5}},
+    // 30 bits, the most: 4096 samples 8 apart on one axis, 0.001 on the others.
+    {"spacings 8 and 0.001 over 4096 samples", {4096, 2, 2}, {8, 0.001, 0.001}, {0, 0, 0}},
 };
 
 Volume VolumeAt(const Placement& p) {
@@ -63,8 +67,23 @@ TEST(Quantization, BitsForUnitSpacing) {
   }
 }
 
+// Up to 30 bits before positions go unquantized (24 was the most: past it the bound failed).
+TEST(Quantization, BoxesOfUpTo2To25SpacingsAreQuantized) {
+  Volume v;
+  v.dims = {4096, 2, 2};
+  v.spacing = {8, 0.001, 0.001};  // the box spans ~3.3e7 smallest spacings
+  QuantizationBox box;
+  int bits = -1;
+  QuantizationFor(v, &box, &bits);
+  EXPECT_EQ(bits, 30);
+  v.spacing[0] = 9;  // ~3.7e7: past what 30 bits can step at 1/64 voxel
+  QuantizationFor(v, &box, &bits);
+  EXPECT_EQ(bits, 0);
+}
+
 // Positions anywhere in the data box (its corners included) survive the frame codec within
-// 1/64 of the smallest spacing plus a few float steps of the coordinate, and within the bound
+// 1/64 of the smallest spacing plus four float steps of the box's farthest corner from the
+// origin, and within the bound
 // the daemon reports (PositionErrorBound); 0 bits (unquantized) only where 30 could not do or
 // the box is too narrow for Draco's quantization.
 TEST(Quantization, EveryPlacementKeepsItsPositionsWithinTheBound) {
@@ -118,11 +137,17 @@ TEST(Quantization, EveryPlacementKeepsItsPositionsWithinTheBound) {
       ASSERT_TRUE(DecodeChunk(bytes.data(), bytes.size(), &decoded).ok());
       ASSERT_EQ(decoded.triangles.size(), mesh.triangles.size());
       const double reported = PositionErrorBound(box, bits);
+      const double float_steps =
+          bits == 0 ? 0.0
+                    : 4 * FLT_EPSILON *
+                          (std::max({std::abs(box.origin[0]), std::abs(box.origin[1]),
+                                     std::abs(box.origin[2])}) +
+                           box.range);
       for (size_t i = 0; i < mesh.triangles.size(); ++i) {
         for (int a = 0; a < 3; ++a) {
           const double exact = mesh.positions[3 * mesh.triangles[i] + a];
           const double got = decoded.positions[3 * decoded.triangles[i] + a];
-          ASSERT_LE(std::abs(got - exact), voxel / 64 + 4 * FLT_EPSILON * std::abs(exact))
+          ASSERT_LE(std::abs(got - exact), voxel / 64 + float_steps)
               << "vertex " << mesh.triangles[i] << " axis " << a << ", " << bits << " bits";
           ASSERT_LE(std::abs(got - exact), reported) << "the reported bound, " << bits << " bits";
         }

@@ -117,6 +117,27 @@ TEST(VolumeVdbUserFiles, OnlyLevelSetsAndFogVolumesGoOnPastTheirActiveBox) {
   }
 }
 
+// The margin never makes a grid the limits refuse: a level set whose active voxels are as wide
+// as max_dim loads as wide as they are (it was refused as 4098 wide, dims the user never made).
+TEST(VolumeVdbUserFiles, TheMarginYieldsToTheLimits) {
+  auto grid = openvdb::FloatGrid::create(3.0f);
+  grid->setName("band");
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  for (int x = 0; x < 64; ++x)
+    for (int y = 0; y < 2; ++y)
+      for (int z = 0; z < 2; ++z) grid->tree().setValue(openvdb::Coord(x, y, z), 0.5f * (x % 4));
+  const std::string path = WriteVdb("band.vdb", {grid});
+  VolumeLimits limits;
+  limits.max_dim = 64;
+  const absl::StatusOr<VolumePtr> tight = LoadVolume(path, limits);
+  ASSERT_TRUE(tight.ok()) << tight.status();
+  EXPECT_EQ((*tight)->dims, (std::array<int, 3>{64, 2, 2}));
+  limits.max_dim = 66;
+  const absl::StatusOr<VolumePtr> roomy = LoadVolume(path, limits);
+  ASSERT_TRUE(roomy.ok()) << roomy.status();
+  EXPECT_EQ((*roomy)->dims, (std::array<int, 3>{66, 4, 4}));
+}
+
 // A level set's offset surface inside its narrow band (iso 1.4 of a band of +-1.5) is a closed
 // sphere too: the band's outermost active voxels stop short of it at the poles, where the
 // background (+1.5) lies beyond. It had 480 open edges.

@@ -245,8 +245,11 @@ struct HeadlessContext::Impl {
     }
     GLint max_samples = 1;
     glGetIntegerv(GL_MAX_SAMPLES, &max_samples);
+    // The most samples, up to those asked, that the GL offers and kMaxSamplesInAll holds (the
+    // depth buffer's too): halving them until they fit.
+    const int64_t buffers = with_depth ? 2 : 1;
     samples = std::max(1, std::min(asked_samples, int(max_samples)));
-    if (int64_t{w} * h * samples > kMaxSamplesInAll) samples = 1;
+    while (samples > 1 && int64_t{w} * h * samples * buffers > kMaxSamplesInAll) samples /= 2;
     // Storage of `format` for `buffer`, multisampled when samples > 1.
     auto store = [&](const gl::Renderbuffer& buffer, GLenum format, int count) {
       glBindRenderbuffer(GL_RENDERBUFFER, buffer.get());
@@ -272,7 +275,10 @@ struct HeadlessContext::Impl {
       glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth.get());
     }
     ISOSTREAM_RETURN_IF_ERROR(complete("drawing"));
-    if (samples > 1) {
+    if (samples == 1) {  // a resize past the cap: the resolving buffers are not needed now
+      resolved.reset();
+      resolved_color.reset();
+    } else {
       if (!resolved) resolved = gl::Framebuffer::Make();
       if (!resolved_color) resolved_color = gl::Renderbuffer::Make();
       glBindFramebuffer(GL_FRAMEBUFFER, resolved.get());
@@ -368,6 +374,7 @@ absl::StatusOr<Image> HeadlessContext::ReadPixels() {
   glReadBuffer(GL_COLOR_ATTACHMENT0);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadPixels(0, 0, image.width, image.height, GL_RGBA, GL_UNSIGNED_BYTE, image.rgba.data());
+  impl_->Bind();  // reads and draws go to the drawing framebuffer again, as after Create
   ISOSTREAM_RETURN_IF_ERROR(gl::CheckGl("HeadlessContext::ReadPixels"));
   // GL's rows start at the bottom; images start at the top.
   const size_t row = 4 * size_t(image.width);
