@@ -67,6 +67,25 @@ TEST(Quantization, BitsForUnitSpacing) {
   }
 }
 
+// Volumes of every size the daemon serves, anisotropic and off the origin: at most 1/64 voxel,
+// and a box holding the data.
+TEST(Quantization, AtMostOneSixtyFourthVoxel) {
+  for (int n : {9, 65, 129, 513, 2049}) {
+    Volume v;
+    v.dims = {n, n / 2 + 1, n};
+    v.spacing = {0.5, 0.25, 0.5};
+    v.origin = {-3, 10, 0};
+    QuantizationBox box;
+    int bits;
+    QuantizationFor(v, &box, &bits);
+    EXPECT_LE(PositionErrorBound(box, bits), 0.25 / 64 * 1.01) << n;
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_LT(box.origin[a], v.origin[a]);
+      EXPECT_GT(box.origin[a] + box.range, v.origin[a] + v.spacing[a] * (v.dims[a] - 1));
+    }
+  }
+}
+
 // Up to 30 bits before positions go unquantized (24 was the most: past it the bound failed).
 TEST(Quantization, BoxesOfUpTo2To25SpacingsAreQuantized) {
   Volume v;
