@@ -258,6 +258,16 @@ TEST_F(ConfiguredDaemon, TheVolumesCommandListsTheCatalogueAndItsFacts) {
       RunCommand(ShellQuote(ISOSTREAM_CLI_PATH) + " volumes --server " + daemon_->address());
   EXPECT_EQ(names.code, 0) << names.output;
   EXPECT_EQ(names.output, "ball\nbig\ndamaged\nramp\n");
+  // A --tls-ca holding no certificate is an argument's fault (exit 2), for stats too.
+  const std::string empty_ca = scratch_->path() + "/empty.pem";
+  std::ofstream(empty_ca).close();
+  for (const char* command : {" volumes", " stats"}) {
+    const CommandResult bad_ca =
+        RunCommand(ShellQuote(ISOSTREAM_CLI_PATH) + command + " --server " + daemon_->address() +
+                   " --tls-ca " + empty_ca);
+    EXPECT_EQ(bad_ca.code, 2) << command << "\n" << bad_ca.output;
+    EXPECT_NE(bad_ca.output.find("holds no certificates"), std::string::npos) << bad_ca.output;
+  }
   auto unknown = Connect()->Fetch(MakeView("nope", 1, 0.01, glm::dvec3(2, 2, 2)));
   EXPECT_NE(unknown.status().message().find("`isostream volumes` lists them"), std::string::npos)
       << unknown.status();

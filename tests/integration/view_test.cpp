@@ -106,7 +106,9 @@ TEST(View, RendersStreamedFramesAndFailsClearly) {
            // A window that would never close itself, or whose -o would never be written.
            {"--window --exit-after 0", "--exit-after"},
            {"--window --exit-after -1", "--exit-after"},
-           {"--window", "--exit-after"}}) {
+           {"--window", "--exit-after"},
+           {"--samples 0", "--samples"},
+           {"--samples 17", "--samples"}}) {
     const ViewRun r =
         View("--server 127.0.0.1:1 --volume buckyball:65 -o " + png + " " + args, true);
     EXPECT_EQ(r.code, 2) << args;
