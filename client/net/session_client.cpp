@@ -367,4 +367,18 @@ absl::StatusOr<std::unique_ptr<Session>> Client::OpenSession() {
   return s;
 }
 
+absl::StatusOr<std::unique_ptr<Client>> ConnectWith(const ConnectionFlags& flags,
+                                                    ClientOptions* options) {
+  options->address = flags.server;
+  options->token = flags.token;
+  options->call_timeout = std::chrono::seconds(flags.timeout_s);
+  options->call_timeout_means = flags.timeout_means;
+  if (!flags.tls_ca.empty()) {
+    auto pem = ReadTlsCa(flags.tls_ca);
+    if (!pem.ok()) return pem.status();
+    options->tls_ca_pem = std::move(*pem);
+  }
+  return Client::Connect(*options);
+}
+
 }  // namespace isostream::net

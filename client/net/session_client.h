@@ -152,4 +152,20 @@ class Client {
   std::unique_ptr<pb::Isostream::Stub> stub_;
 };
 
+// How a client program's flags name the daemon (--server, --token, --tls-ca, --timeout-s).
+struct ConnectionFlags {
+  std::string server = "127.0.0.1:7878";
+  std::string token;
+  std::string tls_ca;  // a PEM file's path; empty: plaintext
+  int timeout_s = 60;
+  // What --timeout-s bounds, in the program's own words (ClientOptions::call_timeout_means).
+  std::string timeout_means = "--timeout-s bounds each call";
+};
+
+// Sets `options`' address, token, timeout and TLS roots from `flags` (its other fields are the
+// caller's) and connects. InvalidArgument for a --tls-ca file that holds no certificate or an
+// address or token gRPC cannot take: the flags' fault.
+absl::StatusOr<std::unique_ptr<Client>> ConnectWith(const ConnectionFlags& flags,
+                                                    ClientOptions* options);
+
 }  // namespace isostream::net

@@ -207,24 +207,21 @@ int Run(const Args& args) {
   if (!size_ok.ok()) return Fail(size_ok);
 
   net::ClientOptions options;
-  options.address = args.server;
-  options.token = args.token;
   options.max_frame_triangles = args.max_frame_triangles;
-  // Connecting and the volume's description wait no longer than the frames do.
-  options.call_timeout = std::chrono::seconds(args.timeout_s);
-  // Frames are bounded by silence, not as a whole (Connection): only the unary calls by this.
-  options.call_timeout_means = "--timeout-s bounds each wait for the server";
-  if (!args.tls_ca.empty()) {
-    auto pem = net::ReadTlsCa(args.tls_ca);
-    if (!pem.ok()) return Fail(pem.status());
-    options.tls_ca_pem = std::move(*pem);
-  }
+  // Connecting and the volume's description wait no longer than the frames do; frames are
+  // bounded by silence, not as a whole (Connection): only the unary calls by the call timeout.
+  net::ConnectionFlags flags;
+  flags.server = args.server;
+  flags.token = args.token;
+  flags.tls_ca = args.tls_ca;
+  flags.timeout_s = args.timeout_s;
+  flags.timeout_means = "--timeout-s bounds each wait for the server";
+  auto client = net::ConnectWith(flags, &options);
+  if (!client.ok()) return Fail(client.status());
   // Errors of calls to the daemon, with a hint where the code alone says little.
   auto call_failed = [&](const absl::Status& s) {
     return Fail(absl::Status(s.code(), net::ExplainCallError(s, options)));
   };
-  auto client = net::Client::Connect(options);
-  if (!client.ok()) return Fail(client.status());
   // The bounds and the value range are all the viewer needs: one bin costs the server nothing.
   auto info = (*client)->GetVolumeInfo(args.volume, 1);
   if (!info.ok()) return call_failed(info.status());

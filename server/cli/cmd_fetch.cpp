@@ -81,7 +81,7 @@ int RunFetch(const FetchArgs& args) {
     return fail(std::string(valid.message()), 2);
   net::ClientOptions options;
   options.max_frame_triangles = args.max_frame_triangles;
-  auto client = ConnectTo(args.connection, &options);
+  auto client = net::ConnectWith(args.connection, &options);
   if (!client.ok())
     return fail(std::string(client.status().message()), ExitCodeFor(client.status()));
 

@@ -16,7 +16,7 @@ int RunStats(const ConnectionArgs& args) {
     return code;
   };
   net::ClientOptions options;
-  auto client = ConnectTo(args, &options);
+  auto client = net::ConnectWith(args, &options);
   if (!client.ok())
     return fail(std::string(client.status().message()), ExitCodeFor(client.status()));
   auto stats = (*client)->GetServerStats();

@@ -40,7 +40,7 @@ int RunVolumes(const VolumesArgs& args) {
     return code;
   };
   net::ClientOptions options;
-  auto client = ConnectTo(args.connection, &options);
+  auto client = net::ConnectWith(args.connection, &options);
   if (!client.ok())
     return fail(std::string(client.status().message()), ExitCodeFor(client.status()));
   auto list = (*client)->ListVolumes();
