@@ -28,27 +28,27 @@ namespace {
 std::string g_glfw_error;  // GLFW reports errors through a callback, before any window exists
 
 // The orbit the mouse drives: the eye on a sphere around the target, yaw about the vertical
-// (`up`, --up) and pitch towards it, in the frame (side, up, front) that is the world's x, y, z
-// for the default vertical +y.
+// (--up) and pitch towards it, in the frame about it (render::FrameAbout: the world's axes for
+// the default vertical +y).
 struct Orbit {
   glm::vec3 target{0.0f};
-  glm::vec3 up{0, 1, 0}, front{0, 0, 1}, side{1, 0, 0};
+  render::VerticalFrame frame = render::FrameAbout({0, 1, 0});
   float distance = 1, yaw = 0, pitch = 0;
 
   static Orbit From(const render::Camera& c, const glm::vec3& vertical) {
     Orbit o;
     o.target = c.target;
-    const render::VerticalFrame frame = render::FrameAbout(vertical);
-    o.up = frame.up, o.front = frame.front, o.side = frame.side;
+    o.frame = render::FrameAbout(vertical);
     const glm::vec3 d = c.eye - c.target;
     o.distance = render::LengthOf(d);
-    o.yaw = std::atan2(glm::dot(d, o.side), glm::dot(d, o.front));
-    o.pitch = std::asin(std::clamp(glm::dot(d, o.up) / o.distance, -1.0f, 1.0f));
+    o.yaw = std::atan2(glm::dot(d, o.frame.side), glm::dot(d, o.frame.front));
+    o.pitch = std::asin(std::clamp(glm::dot(d, o.frame.up) / o.distance, -1.0f, 1.0f));
     return o;
   }
   glm::vec3 Eye() const {
-    return target + distance * (std::cos(pitch) * std::sin(yaw) * side + std::sin(pitch) * up +
-                                std::cos(pitch) * std::cos(yaw) * front);
+    return target +
+           distance * (std::cos(pitch) * std::sin(yaw) * frame.side + std::sin(pitch) * frame.up +
+                       std::cos(pitch) * std::cos(yaw) * frame.front);
   }
 };
 
