@@ -87,6 +87,8 @@ absl::Status SerializeGlbUnguarded(const OrderedMesh& mesh, const GlbOptions& op
                                    std::string* out) {
   ISOSTREAM_RETURN_IF_ERROR(ValidateMesh(mesh));
   ISOSTREAM_RETURN_IF_ERROR(internal::CheckCodecOptions(options.codec));
+  if (!(options.meters_per_unit >= 0 && std::isfinite(options.meters_per_unit)))
+    return absl::InvalidArgumentError("meters per unit must be a finite number >= 0");
   json document = {{"asset", {{"version", "2.0"}, {"generator", "isostream"}}}, {"scene", 0}};
   if (mesh.empty()) {
     // glTF forbids empty arrays, so the scene simply has no "nodes".
@@ -176,7 +178,12 @@ absl::Status SerializeGlbUnguarded(const OrderedMesh& mesh, const GlbOptions& op
   document["extensionsUsed"] = {kDracoExtension};
   document["extensionsRequired"] = {kDracoExtension};
   document["scenes"] = json::array({json{{"nodes", {0}}}});
-  document["nodes"] = json::array({json{{"mesh", 0}}});
+  json node = {{"mesh", 0}};
+  // The vertices stay in the volume's units (as the daemon streams them); the node turns them
+  // into glTF's meters.
+  const double scale = options.meters_per_unit;
+  if (scale > 0 && scale != 1) node["scale"] = {scale, scale, scale};
+  document["nodes"] = json::array({node});
   document["meshes"] = json::array({json{{"primitives", json::array({primitive})}}});
   document["materials"] = json::array({material});
   document["accessors"] = std::move(accessors);

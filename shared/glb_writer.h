@@ -33,6 +33,10 @@ struct GlbOptions {
   // Quantization used for the Draco primitive. compress_connectivity applies as in the frame
   // codec.
   CodecOptions codec;
+  // Meters per unit of the mesh's coordinates (Volume::meters_per_unit), 0 if unknown. glTF's
+  // unit is the meter: a known unit other than it becomes the node's scale, the vertices
+  // staying as they are; an unknown one leaves the coordinates to be read as meters.
+  double meters_per_unit = 0;
 };
 
 // Serializes `mesh` as GLB bytes into `out` (replaced). Returns InvalidArgument if the mesh

@@ -89,6 +89,7 @@ int RunExtract(const ExtractArgs& args) {
   QuantizationBox box;
   QuantizationFor(*prepared->volume, &box, &glb_options.codec.position_bits);
   glb_options.codec.position_box = box;
+  glb_options.meters_per_unit = prepared->volume->meters_per_unit;
   // Each surface in the viewer's default colour and opacity (COLOR_0), so the file opened in
   // Blender or three.js tells the surfaces apart as the viewer does.
   for (size_t i = 0; i < request->isovalues.size(); ++i)

@@ -32,6 +32,8 @@ void PrintInfo(const pb::VolumeInfo& v) {
   std::printf("  position error  %s%s\n", ShortestText(v.position_error()).c_str(),
               v.position_error() == 0 ? " (unquantized positions)" : "");
   if (!v.orientation().empty()) std::printf("  orientation     %s\n", v.orientation().c_str());
+  if (v.meters_per_unit() > 0)
+    std::printf("  unit            %s m\n", ShortestText(v.meters_per_unit()).c_str());
 }
 
 int RunVolumes(const VolumesArgs& args) {

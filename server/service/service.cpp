@@ -183,6 +183,7 @@ grpc::ServerUnaryReactor* IsostreamService::GetVolumeInfo(grpc::CallbackServerCo
     info.set_max_value(v.max_value);
     info.set_position_error((*served)->position_error);
     info.set_orientation(v.orientation);
+    info.set_meters_per_unit(v.meters_per_unit);
     const auto counts =
         (*served)->histograms.Get(v, h, bins, [context] { return context->IsCancelled(); });
     if (!counts) return finish(gone);

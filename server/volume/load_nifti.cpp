@@ -23,6 +23,7 @@ constexpr int kPixdimOffset = 76;      // float pixdim[8]
 constexpr int kVoxOffsetOffset = 108;  // float
 constexpr int kSclSlopeOffset = 112;   // float
 constexpr int kSclInterOffset = 116;   // float
+constexpr int kXyztUnitsOffset = 123;  // char: spatial units in bits 0-2
 constexpr int kQformCodeOffset = 252;  // short
 constexpr int kSformCodeOffset = 254;  // short
 constexpr int kQuaternOffset = 256;    // float quatern_b, _c, _d
@@ -39,6 +40,17 @@ constexpr NiftiType kNiftiTypes[] = {
     {2, SampleType::kUint8}, {4, SampleType::kInt16},    {512, SampleType::kUint16},
     {8, SampleType::kInt32}, {16, SampleType::kFloat32}, {64, SampleType::kFloat64},
 };
+
+// Meters per unit of nifti1.h's spatial unit codes NIFTI_UNITS_METER, _MM and _MICRON; 0 for
+// NIFTI_UNITS_UNKNOWN and the codes nifti1.h leaves undefined.
+double MetersPerUnit(unsigned char xyzt_units) {
+  switch (xyzt_units & 0x07) {
+    case 1: return 1;
+    case 2: return 1e-3;
+    case 3: return 1e-6;
+    default: return 0;
+  }
+}
 
 class HeaderView {
  public:
@@ -258,6 +270,11 @@ absl::StatusOr<VolumePtr> LoadNiftiFile(const std::string& spec, const std::stri
   std::string grid_name = path.substr(path.find_last_of('/') + 1);
   ISOSTREAM_ASSIGN_OR_RETURN(VolumePtr stored, ReadSamples(input, layout, spec, grid_name,
                                                            file_spacing, orientation.origin, stop));
+  if (const double meters = MetersPerUnit(bytes[kXyztUnitsOffset]); meters > 0) {
+    auto with_units = std::make_shared<Volume>(*stored);  // shares the grid
+    with_units->meters_per_unit = meters;
+    stored = std::move(with_units);
+  }
   if (orientation.Describe().empty()) return stored;
   return Reorient(std::move(stored), orientation);
 }

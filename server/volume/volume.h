@@ -25,6 +25,9 @@ struct Volume {
   float max_value = 0;
   // How the file's axes were turned onto the world's (orientation.h); empty when as stored.
   std::string orientation;
+  // Meters per world unit where the file says (NIfTI's xyzt_units), else 0 (raw and .vdb files
+  // and the generators carry no unit). glTF's unit is the meter: .glb files scale by it.
+  double meters_per_unit = 0;
 
   int64_t voxel_count() const { return int64_t{dims[0]} * dims[1] * dims[2]; }
 };

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -91,6 +92,39 @@ TEST(Cli, GlbPositionsAreWithinAVoxelSixtyFourth) {
   const size_t json_length = size_t(uint8_t((*bytes)[12])) | size_t(uint8_t((*bytes)[13])) << 8 |
                              size_t(uint8_t((*bytes)[14])) << 16;
   EXPECT_NE(bytes->substr(20, json_length).find("\"COLOR_0\""), std::string::npos);
+}
+
+// A volume in millimetres (NIfTI's xyzt_units) gives a .glb whose node scales to glTF's meters,
+// its vertices as in the PLY; `info` names the unit.
+TEST(Cli, GlbOfAVolumeInMillimetresIsInMeters) {
+  volume_files::NiftiFile nf;
+  nf.dims = {17, 17, 17};
+  nf.datatype = 2;  // uint8
+  nf.bitpix = 8;
+  nf.pixdim = {0.5, 0.5, 0.5};
+  nf.xyzt_units = 2 | 8;  // mm, s
+  const std::string nii = TempPath("cli-mm.nii");
+  volume_files::WriteBytes(
+      nii, volume_files::Concat(nf.Header(),
+                                volume_files::Samples(volume_files::Type::kUint8, nf.dims, false)));
+  const CliRun info = Cli("info --volume " + nii + " --no-cache");
+  ASSERT_EQ(info.code, 0) << info.output;
+  EXPECT_NE(info.output.find("unit          0.001 m"), std::string::npos) << info.output;
+  const std::string glb = TempPath("cli-mm.glb");
+  ASSERT_EQ(Cli("extract --volume " + nii + " --iso 127.5 --eps 0 --no-cache -o " + glb).code, 0);
+  auto bytes = ReadFileBytes(glb);
+  ASSERT_TRUE(bytes.ok()) << bytes.status();
+  auto chunks = ParseGlbChunks(*bytes);
+  ASSERT_TRUE(chunks.ok()) << chunks.status();
+  const auto doc = nlohmann::json::parse(chunks->json);
+  EXPECT_EQ(doc["nodes"][0]["scale"], nlohmann::json::array({1e-3, 1e-3, 1e-3})) << doc.dump();
+  auto decoded = ParseGlb(*bytes);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  float widest = 0;  // half-voxel samples of 17 points: the data span 8 mm
+  for (size_t i = 0; i < decoded->positions.size(); ++i)
+    widest = std::max(widest, decoded->positions[i]);
+  EXPECT_GT(widest, 2.0f);
+  EXPECT_LE(widest, 8.01f);
 }
 
 TEST(Cli, BadInputsExitNonZeroWithAClearMessage) {

@@ -220,6 +220,35 @@ TEST(MeshGlb, OptionalAttributesFollowTheInput) {
   EXPECT_EQ(decoded->surface, bare.surface);
 }
 
+// glTF's unit is the meter. A volume in millimetres keeps its coordinates (as the daemon streams
+// them) and the node scales them; no unit, or meters already, adds no scale.
+TEST(MeshGlb, AKnownUnitBecomesTheNodesScaleToMeters) {
+  const OrderedMesh mesh = MakeGrid(5, 1);
+  GlbOptions mm;
+  mm.meters_per_unit = 1e-3;
+  const ParsedGlb glb = Parse(Serialize(mesh, mm));
+  ASSERT_EQ(glb.document["nodes"].size(), 1u);
+  EXPECT_EQ(glb.document["nodes"][0]["scale"], json::array({1e-3, 1e-3, 1e-3}));
+  const absl::StatusOr<OrderedMesh> decoded = ParseGlb(Serialize(mesh, mm));
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  const absl::StatusOr<OrderedMesh> unscaled = ParseGlb(Serialize(mesh, GlbOptions{}));
+  ASSERT_TRUE(unscaled.ok()) << unscaled.status();
+  EXPECT_EQ(decoded->positions, unscaled->positions);  // the vertices are not scaled
+  for (const double none : {0.0, 1.0}) {
+    GlbOptions options;
+    options.meters_per_unit = none;
+    EXPECT_FALSE(Parse(Serialize(mesh, options)).document["nodes"][0].contains("scale")) << none;
+  }
+  ScratchDir dir;
+  for (const double bad : {-1e-3, std::nan(""), HUGE_VAL}) {
+    GlbOptions options;
+    options.meters_per_unit = bad;
+    EXPECT_EQ(WriteGlb(mesh, dir.File("unit.glb"), options).code(),
+              absl::StatusCode::kInvalidArgument)
+        << bad;
+  }
+}
+
 TEST(MeshGlb, EmptyMeshGivesAValidEmptyScene) {
   const std::string bytes = Serialize(OrderedMesh{}, GlbOptions{});
   const ParsedGlb glb = Parse(bytes);

@@ -202,6 +202,7 @@ struct NiftiFile {
   float vox_offset = 352;
   float slope = 0;
   float inter = 0;
+  unsigned char xyzt_units = 0;
   int16_t sform_code = 0;
   std::array<float, 3> sform_offset{0, 0, 0};
   int16_t qform_code = 0;
@@ -228,6 +229,7 @@ struct NiftiFile {
     PutAt<float>(h, 108, vox_offset, be);
     PutAt<float>(h, 112, slope, be);
     PutAt<float>(h, 116, inter, be);
+    h[123] = xyzt_units;
     PutAt<int16_t>(h, 252, qform_code, be);
     PutAt<int16_t>(h, 254, sform_code, be);
     for (int i = 0; i < 3; ++i) PutAt<float>(h, 256 + 4 * i, quatern[i], be);

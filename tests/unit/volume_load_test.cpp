@@ -188,6 +188,28 @@ TEST(VolumeLoadNifti, BigEndian) {
   }
 }
 
+// xyzt_units' spatial bits name the unit (time units in the bits above do not change it); a
+// rotated file (sform off the axes, turned by Reorient) keeps it.
+TEST(VolumeLoadNifti, SpatialUnitsGiveMetersPerUnit) {
+  const std::pair<unsigned char, double> cases[] = {
+      {0, 0}, {1, 1}, {2, 1e-3}, {3, 1e-6}, {2 | 8, 1e-3}, {3 | 16, 1e-6}, {8, 0}, {5, 0}, {7, 0}};
+  for (const auto& [units, meters] : cases) {
+    for (const bool turned : {false, true}) {
+      NiftiFile nf;
+      nf.xyzt_units = units;
+      if (turned) {  // file axis i on world -y, j on +x
+        nf.sform_code = 1;
+        nf.srow = std::array<std::array<float, 3>, 3>{{{0, 1, 0}, {-1, 0, 0}, {0, 0, 1}}};
+      }
+      absl::StatusOr<VolumePtr> v =
+          WriteAndLoad(nf, "units_" + std::to_string(units) + (turned ? "_turned" : "") + ".nii");
+      ASSERT_TRUE(v.ok()) << v.status();
+      EXPECT_EQ((*v)->meters_per_unit, meters) << int(units);
+      EXPECT_EQ((*v)->orientation.empty(), !turned);
+    }
+  }
+}
+
 // ------------------------------------------------------------------------------------------------
 // raw
 
