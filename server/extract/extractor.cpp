@@ -123,6 +123,16 @@ Context MakeContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequ
   return c;
 }
 
+// A count pass's context: a count does not depend on the draw order, so the pass neither
+// decides which child comes first (a plane side per node) nor orders a leaf's components (a
+// gradient); Traverser<false> leaves the §5 gradients out too.
+Context MakeCountContext(const Hierarchy& h, const GridToWorld& xf, const ExtractRequest& r,
+                         double eps) {
+  Context c = MakeContext(h, xf, r, eps);
+  c.ordered = false;
+  return c;
+}
+
 // Cuts the top of the tree into subtrees in draw order. Deterministic (independent of the
 // thread count) so the output is too. With a curve (a count pass that gathers one), the nodes
 // refined here add their share to it as the traversal's do, and pass their eta caps down.
@@ -262,7 +272,7 @@ int64_t CountAt(const Context& c, int64_t limit, const ExtractObserver* observer
 absl::StatusOr<int64_t> CountTriangles(const Hierarchy& h, const GridToWorld& xf,
                                        const ExtractRequest& r, double eps, int64_t limit) {
   ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
-  const Context c = MakeContext(h, xf, r, eps);
+  const Context c = MakeCountContext(h, xf, r, eps);
   tbb::task_arena arena(ArenaSize(r.threads));
   return arena.execute([&] { return CountAt(c, limit); });
 }
@@ -293,7 +303,7 @@ absl::StatusOr<std::vector<int64_t>> CountTrianglesPerEtaCode(const Hierarchy& h
   ISOSTREAM_RETURN_IF_ERROR(ValidateRequest(r));
   if (first_code > last_code || last_code > kInfiniteEtaCode)
     return absl::InvalidArgumentError("eta codes must satisfy first <= last <= 0x7f80");
-  Context c = MakeContext(h, xf, r, EtaCodeEps(first_code));
+  Context c = MakeCountContext(h, xf, r, EtaCodeEps(first_code));
   c.block_level = -1;
   CountCurve curve(first_code, last_code);
   tbb::task_arena arena(ArenaSize(r.threads));
@@ -333,7 +343,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     auto count_at = [&](uint32_t code, CountCurve* curve) -> std::optional<int64_t> {
       if (stopped.ok()) stopped = StopReason(observer);
       if (!stopped.ok()) return std::nullopt;
-      Context c = MakeContext(h, xf, r, EtaCodeEps(code));
+      Context c = MakeCountContext(h, xf, r, EtaCodeEps(code));
       if (curve) c.block_level = -1;
       const int64_t n = CountAt(c, limit, observer, &stopped, curve);
       if (!stopped.ok()) return std::nullopt;

@@ -68,7 +68,7 @@ class Traverser {
             if (!kEmit && triangles > limit) return triangles;
             break;
           }
-          Bisect(c_, *cur, spare, &stack[top++]);
+          Bisect<kEmit>(c_, *cur, spare, &stack[top++]);
           if constexpr (kRecord)
             second_of[top - 1] = cut_->AddRefine(
                 PlaneSide(c_, cur->cls, (cur->v[0] + cur->v[3]) >> 1), cur->cls, cur->child0_first);

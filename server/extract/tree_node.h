@@ -217,8 +217,10 @@ inline void ComponentOrder(const Context& c, Gradient gradient, float f0, Packed
   }
 }
 
-// The children of t in draw order: the farther one (drawn first) in *first.
+// The children of t in draw order: the farther one (drawn first) in *first. Without
+// kGradient (counting) the children's §5 gradients are left unset: only emission reads them.
 // Always inlined: the traversal loop is its only hot caller, and a call here cost ~1%.
+template <bool kGradient = true>
 __attribute__((always_inline)) inline void Bisect(const Context& c, const Node& t, Node* first,
                                                   Node* second) {
   const ReferenceTet& rt = (*c.tables)[t.cls];
@@ -226,7 +228,7 @@ __attribute__((always_inline)) inline void Bisect(const Context& c, const Node& 
   const float fx = c.F(t.xref_value);
   const float fp[5] = {t.f[0], t.f[1], t.f[2], t.f[3], fx};
   const PackedPoint points[5] = {t.v[0], t.v[1], t.v[2], t.v[3], x};
-  const double w = Wavelet(c, fx, t.f[0], t.f[3], t.level);
+  const double w = kGradient ? Wavelet(c, fx, t.f[0], t.f[3], t.level) : 0.0;
   const bool child0_first = t.child0_first;
   for (int ch = 0; ch < 2; ++ch) {
     Node& o = *((ch == 0) == child0_first ? first : second);
@@ -235,7 +237,7 @@ __attribute__((always_inline)) inline void Bisect(const Context& c, const Node& 
       o.v[i] = points[cp[i]];
       o.f[i] = fp[cp[i]];
     }
-    o.g = t.g + w * rt.gradient_update[ch];
+    if constexpr (kGradient) o.g = t.g + w * rt.gradient_update[ch];
     o.cls = rt.child[ch];
     o.level = uint8_t(t.level + 1);
     // The child's first read is its refinement vertex: start fetching it now (the second
