@@ -475,6 +475,7 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     if (observer && observer->on_ready) observer->on_ready(m, first, m.triangle_count());
   };
 
+  const bool gradients = extract_internal::NeedsGradients(c);
   arena.execute([&] {
     // Workers take subtrees in draw order from a shared counter (not halves of the range, as
     // parallel_for would), so the appended prefix grows steadily: appending overlaps
@@ -501,8 +502,10 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
               const size_t after = records.capacity_bytes();
               if (after > before && retain->reserve_ && !retain->reserve_(int64_t(after - before)))
                 recording = false;
-            } else {
+            } else if (gradients) {
               Traverser<true>(c, &table, part.get()).Run(items[i]);
+            } else {
+              Traverser<true, false, false>(c, &table, part.get()).Run(items[i]);
             }
             if (part->maybe_unused) part->DropUnusedVertices();
             std::lock_guard<std::mutex> lock(mu);

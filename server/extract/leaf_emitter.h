@@ -72,10 +72,12 @@ class LeafEmitter {
 
   // Marching tetrahedra on leaf t for the sorted isovalues [first, last) crossing it, components
   // far to near. A leaf whose node carries no gradient (a block's, with smooth normals) passes
-  // how to derive it; that is read only to order several surfaces or when central differences
-  // vanish, so an indirect call is cheap enough.
-  int Leaf(const Node& t, int first, int last, GradientFn lazy = nullptr,
-           const void* lazy_state = nullptr) {
+  // how to derive it; that is read only to order several surfaces (and recorded with them), so
+  // an indirect call is cheap enough. Always inlined: with two emitting traversals
+  // (with and without gradients) GCC stopped inlining it into the blocks' leaves (+0.8%).
+  __attribute__((always_inline)) int Leaf(const Node& t, int first, int last,
+                                          GradientFn lazy = nullptr,
+                                          const void* lazy_state = nullptr) {
     lazy_ = lazy, lazy_state_ = lazy_state;
     const int n = Components(t, first, last);
     lazy_ = nullptr;

@@ -32,8 +32,10 @@ namespace isostream::extract_internal {
 
 // Emits triangles (kEmit) or only counts them, for one subtree. A count pass may also gather
 // the count at every coarser eps into `curve` (count_curve.h); its context must have blocks off
-// (block_level -1), since the curve needs the eta of every node the blocks skip.
-template <bool kEmit, bool kRecord = false>
+// (block_level -1), since the curve needs the eta of every node the blocks skip. Without
+// kGradient the nodes carry no §5 gradient: for counting, and for emission that reads none
+// (NeedsGradients).
+template <bool kEmit, bool kRecord = false, bool kGradient = kEmit>
 class Traverser {
   static_assert(kEmit || !kRecord, "only an emitting traversal records");
 
@@ -68,7 +70,7 @@ class Traverser {
             if (!kEmit && triangles > limit) return triangles;
             break;
           }
-          Bisect<kEmit>(c_, *cur, spare, &stack[top++]);
+          Bisect<kGradient>(c_, *cur, spare, &stack[top++]);
           if constexpr (kRecord)
             second_of[top - 1] = cut_->AddRefine(
                 PlaneSide(c_, cur->cls, (cur->v[0] + cur->v[3]) >> 1), cur->cls, cur->child0_first);
@@ -210,7 +212,7 @@ class Traverser {
     t.cls = b.cls;
     t.level = uint8_t(fr.root->level + depth);
     // The gradient is needed for flat normals, and otherwise only to order several crossing
-    // surfaces or when central differences vanish: computed on demand then (LeafGradient).
+    // surfaces: computed on demand then (LeafGradient).
     if (c_.normals != NormalMode::kSmooth) {
       t.g = BlockGradient(fr, at, depth);
       return emit_.Leaf(t, first, last);

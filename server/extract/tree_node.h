@@ -194,6 +194,13 @@ inline double Wavelet(const Context& c, float fx, float f0, float f3, int level)
   return (double(fx) - 0.5 * (double(f0) + double(f3))) * c.inv_unit[level];
 }
 
+// Whether an emitting traversal reads the nodes' §5 gradients: for flat normals, and to order
+// several surfaces crossing one leaf (smooth normals come from central differences, and where
+// those vanish, from the edge: LeafEmitter::VanishedGradient).
+inline bool NeedsGradients(const Context& c) {
+  return c.normals != NormalMode::kSmooth || (c.iso_count > 1 && c.ordered);
+}
+
 // The draw order of a leaf's `count` components, far to near (§4.3), into order[] as indices
 // 0..count-1 of their isovalues iso(0) < ... < iso(count - 1). gradient() is the leaf's (§5),
 // read only when the order needs it; f0 and v0 are one corner's value and point. One function
