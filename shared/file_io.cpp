@@ -177,8 +177,25 @@ absl::Status CheckOutputPath(const std::string& path) {
   if (exists && S_ISDIR(st.st_mode))
     return absl::InvalidArgumentError(absl::StrCat(path, " is a directory"));
   if (exists && !S_ISREG(st.st_mode)) return absl::OkStatus();  // a device: written in place
-  const size_t slash = path.rfind('/');
-  const std::string folder = slash == std::string::npos ? "." : path.substr(0, slash + 1);
+  // A link to a file not made yet is written through, making its target: the folder that must
+  // exist is the target's.
+  std::string made = path;
+  if (!exists) {
+    int hops = 0;
+    while (::lstat(made.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
+      if (++hops > 40)
+        return absl::InvalidArgumentError(absl::StrCat("cannot create ", path,
+                                                       ": a loop of symbolic links"));
+      char target[4096];
+      const ssize_t n = ::readlink(made.c_str(), target, sizeof(target));
+      if (n <= 0 || size_t(n) == sizeof(target)) break;
+      const std::string to(target, size_t(n));
+      const size_t at = made.rfind('/');
+      made = to[0] == '/' || at == std::string::npos ? to : made.substr(0, at + 1) + to;
+    }
+  }
+  const size_t slash = made.rfind('/');
+  const std::string folder = slash == std::string::npos ? "." : made.substr(0, slash + 1);
   if (::stat(folder.c_str(), &st) != 0 || !S_ISDIR(st.st_mode))
     return absl::NotFoundError(absl::StrCat("cannot create ", path, ": no folder ", folder));
   if (exists) {

@@ -182,5 +182,28 @@ TEST_F(FileIo, OutputPathsAreCheckedBeforeTheWork) {
   fs::permissions(Path("locked"), fs::perms::owner_all);
 }
 
+// A link to a file not made yet is written through (fopen makes its target), so the folder
+// that must exist is the target's, not the link's: `-o out.ply` with out.ply a link into a
+// folder that is gone passed the check and failed only after the volume was prepared and the
+// frame extracted ("cannot create out.ply: No such file or directory", exit 1 after minutes).
+TEST_F(FileIo, ALinkToAFileInAMissingFolderIsRefusedBeforeTheWork) {
+  fs::create_symlink(Path("missing/target.ply"), Path("link.ply"));
+  EXPECT_EQ(CheckOutputPath(Path("link.ply")).code(), absl::StatusCode::kNotFound);
+  // A link to a file not made yet in a folder that exists stays fine.
+  fs::create_symlink(Path("target.ply"), Path("fine.ply"));
+  EXPECT_TRUE(CheckOutputPath(Path("fine.ply")).ok());
+  EXPECT_TRUE(WriteFileBytes(Path("fine.ply"), "x").ok());
+  // Through a chain of relative links, and a loop of them (which no write could follow).
+  fs::create_directory(Path("sub"));
+  fs::create_symlink("../missing/deeper.ply", Path("sub/hop.ply"));
+  fs::create_symlink("sub/hop.ply", Path("chain.ply"));
+  EXPECT_EQ(CheckOutputPath(Path("chain.ply")).code(), absl::StatusCode::kNotFound);
+  fs::create_symlink("loop_b.ply", Path("loop_a.ply"));
+  fs::create_symlink("loop_a.ply", Path("loop_b.ply"));
+  const absl::Status loop = CheckOutputPath(Path("loop_a.ply"));
+  EXPECT_EQ(loop.code(), absl::StatusCode::kInvalidArgument) << loop;
+  EXPECT_NE(loop.message().find("loop of symbolic links"), std::string::npos) << loop;
+}
+
 }  // namespace
 }  // namespace isostream
