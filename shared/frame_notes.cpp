@@ -8,7 +8,11 @@ namespace isostream {
 
 std::string IsovalueOutsideNote(float iso, float min_value, float max_value,
                                 const std::string& volume) {
-  if (iso >= min_value && iso <= max_value) return "";
+  // A surface bounds the samples >= iso against those below it: none lies below the lowest.
+  if (iso == min_value)
+    return "isovalue " + ShortestText(iso) + " is " + volume +
+           "'s lowest value: no sample lies below it, so no surface bounds it";
+  if (iso > min_value && iso <= max_value) return "";
   return "isovalue " + ShortestText(iso) + " lies outside " + volume + "'s values [" +
          ShortestText(min_value) + ", " + ShortestText(max_value) + "]: no surface for it";
 }

@@ -9,7 +9,9 @@
 
 namespace isostream {
 
-// "isovalue 5 lies outside VOLUME's values [0, 1]: no surface for it".
+// "isovalue 5 lies outside VOLUME's values [0, 1]: no surface for it", and the like for an
+// isovalue at the lowest value (a surface needs samples below it; at the highest it encloses
+// the samples there).
 // In single precision, as the extraction compares them (a float isovalue widened to double
 // printed as 4.900000095367432).
 std::string IsovalueOutsideNote(float iso, float min_value, float max_value,

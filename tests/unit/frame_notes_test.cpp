@@ -8,6 +8,20 @@
 namespace isostream {
 namespace {
 
+// A surface bounds the samples at or above its isovalue: none at the lowest value (nothing lies
+// below it), one at the highest (around the samples there), none outside.
+TEST(FrameNotes, AnIsovalueWithoutASurfaceIsSaidWhy) {
+  EXPECT_EQ(IsovalueOutsideNote(0, 0, 1, "mask"),
+            "isovalue 0 is mask's lowest value: no sample lies below it, so no surface bounds it");
+  EXPECT_EQ(IsovalueOutsideNote(1, 0, 1, "mask"), "");
+  EXPECT_EQ(IsovalueOutsideNote(0.5f, 0, 1, "mask"), "");
+  EXPECT_EQ(IsovalueOutsideNote(std::nextafter(0.0f, 1.0f), 0, 1, "mask"), "");
+  EXPECT_EQ(IsovalueOutsideNote(-1, 0, 1, "mask"),
+            "isovalue -1 lies outside mask's values [0, 1]: no surface for it");
+  EXPECT_NE(IsovalueOutsideNote(2, 0, 1, "mask"), "");
+  EXPECT_NE(IsovalueOutsideNote(3, 3, 3, "constant"), "");  // one value: no surface at all
+}
+
 TEST(FrameNotes, ValuesFewFloatStepsApartAreSaid) {
   // float64 data 1e6 + 0.01 r held as floats: two values, one step apart.
   EXPECT_EQ(CoarseValuesNote(1e6f, 1e6f + 0.0625f, "v"),
