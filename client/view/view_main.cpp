@@ -462,7 +462,9 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;  // usage errors exit 2, as argument errors do; --help 0
+    // Usage errors exit 2, as argument errors do; --help 0 if the help could be written.
+    if (app.exit(e) != 0) return 2;
+    return isostream::FlushStandardOutput("isostream-view") ? 0 : 1;
   }
   if (*exit_after && !args.window) {
     std::fprintf(stderr,

@@ -36,8 +36,9 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // Usage errors exit 2, as the commands' own argument errors do (CLI11's codes are 100+);
-    // --help exits 0.
-    return app.exit(e) == 0 ? 0 : 2;
+    // --help exits 0 if the help could be written.
+    if (app.exit(e) != 0) return 2;
+    return isostream::FlushStandardOutput("isostream") ? 0 : 1;
   } catch (const std::bad_alloc&) {
     // The commands report errors as statuses; these are the last line, so no input ends in
     // std::terminate.

@@ -32,6 +32,7 @@
 #include "server/daemon/listen_failure.h"
 #include "server/service/config.h"
 #include "server/service/service.h"
+#include "shared/file_io.h"
 #include "shared/given_number.h"
 #include "shared/malloc_tuning.h"
 
@@ -288,7 +289,9 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;  // usage errors exit 2, as config errors do; --help 0
+    // Usage errors exit 2, as config errors do; --help 0 if the help could be written.
+    if (app.exit(e) != 0) return 2;
+    return isostream::FlushStandardOutput("isostreamd") ? 0 : 1;
   }
 
   spdlog::set_default_logger(spdlog::stderr_color_mt("isostreamd"));

@@ -356,11 +356,11 @@ TEST(Cli, ThreadsPastTheCoresAreQuiet) {
   EXPECT_EQ(many.output.find("TBB"), std::string::npos) << many.output;
 }
 
-// info --iso: the count at each octave of eps, growing as eps shrinks, closing with eps 0's,
-// which is what extract --eps 0 writes.
-// What a command prints is its result: one that cannot be written is a failure (exit 1).
+// What a command prints is its result: one that cannot be written is a failure (exit 1), help
+// included.
 TEST(Cli, AnUnwritableStandardOutputFails) {
-  for (const std::string cmd : {"tets", "tets --json", "info --volume sphere:9 --no-cache"}) {
+  for (const std::string cmd :
+       {"tets", "tets --json", "info --volume sphere:9 --no-cache", "--help", "extract --help"}) {
     EXPECT_EQ(Cli(cmd + " >/dev/null").code, 0) << cmd;
     EXPECT_EQ(Cli(cmd + " >/dev/full").code, 1) << cmd;
   }
