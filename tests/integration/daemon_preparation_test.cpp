@@ -55,7 +55,8 @@ TEST(NoPreloadDaemon, PreparesOnFirstUse) {
 }
 
 // A NIfTI file stored with its axes turned (i on world -x, j on +z, k on +y) is served on the
-// world's axes: the volume's info says how, with dims, spacing and origin along world axes.
+// world's axes: the volume's info says how, with dims, spacing and origin along world axes, and
+// the file's unit.
 TEST(NoPreloadDaemon, VolumeInfoOfATurnedNiftiFile) {
   ScratchDir dir;
   volume_files::NiftiFile nf;
@@ -63,6 +64,7 @@ TEST(NoPreloadDaemon, VolumeInfoOfATurnedNiftiFile) {
   nf.sform_code = 1;
   nf.srow = std::array<std::array<float, 3>, 3>{{{-2, 0, 0}, {0, 0, 3}, {0, 0.5f, 0}}};
   nf.sform_offset = {10, 20, 30};
+  nf.xyzt_units = 3;  // micrometres
   const std::string path = dir.path() + "/turned.nii";
   volume_files::WriteBytes(
       path, volume_files::Concat(
@@ -81,6 +83,7 @@ TEST(NoPreloadDaemon, VolumeInfoOfATurnedNiftiFile) {
   EXPECT_EQ(info->origin().x(), 10 - 2 * 5);  // the file's last sample along i comes first
   EXPECT_EQ(info->origin().y(), 20);
   EXPECT_EQ(info->origin().z(), 30);
+  EXPECT_EQ(info->meters_per_unit(), 1e-6);
   EXPECT_EQ(daemon.Stop(), 0);
 }
 
