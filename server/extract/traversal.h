@@ -75,9 +75,12 @@ class Traverser {
             second_of[top - 1] = cut_->AddRefine(
                 PlaneSide(c_, cur->cls, (cur->v[0] + cur->v[3]) >> 1), cur->cls, cur->child0_first);
           if (!kEmit && curve_) {
-            // A leaf at the eta codes above its own, up to its nearest ancestor's.
+            // A leaf at the eta codes above its own, up to its nearest ancestor's: counted only
+            // where some of those are on the curve (most nodes above the cut are leaves only
+            // past the codes a pass gathers).
             const uint32_t code = EtaCode(c_, *cur);
-            curve_->Add(code + 1, cur->eta_cap, LeafTriangles(c_, *cur));
+            if (code < std::min(cur->eta_cap, curve_->last()))
+              curve_->Add(code + 1, cur->eta_cap, LeafTriangles(c_, *cur));
             spare->eta_cap = stack[top - 1].eta_cap = std::min(cur->eta_cap, code);
           }
           std::swap(cur, spare);
