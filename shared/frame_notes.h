@@ -24,9 +24,9 @@ std::string IsovalueOutsideNote(float iso, float min_value, float max_value,
 inline constexpr int64_t kCoarseValueSteps = 4096;
 std::string CoarseValuesNote(float min_value, float max_value, const std::string& volume);
 
-// Prints "TOOL: note: ..." to stderr for each isovalue outside [min_value, max_value] (and
-// CoarseValuesNote's, if any), and returns whether some isovalue lies within (FrameNote's
-// some_isovalue_inside).
+// Prints "TOOL: note: ..." to stderr for each isovalue without a surface by the values alone,
+// outside (min_value, max_value] (and CoarseValuesNote's, if any), and returns whether some
+// isovalue lies within (FrameNote's some_isovalue_inside).
 template <typename Isovalues>
 bool NoteIsovaluesOutside(const char* tool, const Isovalues& isovalues, float min_value,
                           float max_value, const std::string& volume) {
@@ -43,8 +43,8 @@ bool NoteIsovaluesOutside(const char* tool, const Isovalues& isovalues, float mi
 
 // For a frame of `triangles` at `eps_used`, asked for with `budget` (0: none) and fitted to
 // `fitted` (a daemon's FrameStats::triangle_budget, lower where its frame limit lowered the
-// budget; `budget` otherwise), where `some_isovalue_inside`: some isovalue lies within the
-// volume's values (else the notes of IsovalueOutsideNote have said why the mesh is empty).
+// budget; `budget` otherwise), where `some_isovalue_inside`: some isovalue lies in the
+// volume's (min, max] (else the notes of IsovalueOutsideNote have said why the mesh is empty).
 std::string FrameNote(int64_t triangles, int64_t budget, int64_t fitted, double eps_used,
                       bool some_isovalue_inside);
 

@@ -65,8 +65,8 @@ absl::StatusOr<GlbChunks> ParseGlbChunks(std::string_view bytes);
 
 // Reads back a GLB in the layout SerializeGlb writes (one primitive compressed with
 // KHR_draco_mesh_compression, _SURFACE attribute) into an OrderedMesh with the same triangle
-// order. Meant for tests and scripts, not as a general glTF loader: other layouts return
-// Unimplemented or InvalidArgument.
+// order, its positions as stored (a node's scale to meters is not applied). Meant for tests and
+// scripts, not as a general glTF loader: other layouts return Unimplemented or InvalidArgument.
 absl::StatusOr<OrderedMesh> ParseGlb(std::string_view bytes);
 
 }  // namespace isostream

@@ -475,7 +475,8 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
     if (observer && observer->on_ready) observer->on_ready(m, first, m.triangle_count());
   };
 
-  const bool gradients = extract_internal::NeedsGradients(c);
+  const bool gradients = extract_internal::NeedsGradients(c, false);
+  const bool recorded_gradients = extract_internal::NeedsGradients(c, true);
   arena.execute([&] {
     // Workers take subtrees in draw order from a shared counter (not halves of the range, as
     // parallel_for would), so the appended prefix grows steadily: appending overlaps
@@ -496,7 +497,11 @@ absl::StatusOr<ExtractResult> Extract(const Hierarchy& h, const GridToWorld& xf,
             if (retain && recording.load(std::memory_order_relaxed)) {
               extract_internal::CutPart& records = retain->parts_[i];
               const size_t before = records.capacity_bytes();
-              Traverser<true, true>(c, &table, part.get(), nullptr, &records).Run(items[i]);
+              if (recorded_gradients)
+                Traverser<true, true>(c, &table, part.get(), nullptr, &records).Run(items[i]);
+              else
+                Traverser<true, true, false>(c, &table, part.get(), nullptr, &records)
+                    .Run(items[i]);
               // Each part's growth is asked for as it happens, so the recording never holds
               // more than it was granted plus what its workers are recording at the moment.
               const size_t after = records.capacity_bytes();

@@ -103,12 +103,16 @@ class LeafEmitter {
       return n;
     }
     const int count = last - first;
+    int triangles = 0;
+    if constexpr (!kEmit) {  // a count needs no order (nor the gradient that makes it)
+      for (int s = first; s < last; ++s) triangles += Component(t, s);
+      return triangles;
+    }
     int order[kMaxSurfaces];  // of the isovalues from `first`
     ComponentOrder(
         c_, [&] { return LeafGradient(t); }, t.f[0], t.v[0],
         [&](int i) { return c_.iso[first + i]; }, count, order);
-    int triangles = 0;
-    if constexpr (!kEmit || !kRecord) {
+    if constexpr (!kRecord) {
       for (int j = 0; j < count; ++j) triangles += Component(t, first + order[j]);
       return triangles;
     }

@@ -217,7 +217,12 @@ class Traverser {
     // The gradient is needed for flat normals, and otherwise only to order several crossing
     // surfaces: computed on demand then (LeafGradient).
     if (c_.normals != NormalMode::kSmooth) {
-      t.g = BlockGradient(fr, at, depth);
+      // Without kGradient (a count pass; emission takes it with flat normals: NeedsGradients)
+      // the root's g is unset, and nothing reads t.g: zero, not a sum over an unset value.
+      if constexpr (kGradient)
+        t.g = BlockGradient(fr, at, depth);
+      else
+        t.g = glm::dvec3(0.0);
       return emit_.Leaf(t, first, last);
     }
     const BlockCursor cursor{this, &fr, at, depth};

@@ -196,9 +196,10 @@ inline double Wavelet(const Context& c, float fx, float f0, float f3, int level)
 
 // Whether an emitting traversal reads the nodes' §5 gradients: for flat normals, and to order
 // several surfaces crossing one leaf (smooth normals come from central differences, and where
-// those vanish, from the edge: LeafEmitter::VanishedGradient).
-inline bool NeedsGradients(const Context& c) {
-  return c.normals != NormalMode::kSmooth || (c.iso_count > 1 && c.ordered);
+// those vanish, from the edge: LeafEmitter::VanishedGradient). A recording one keeps them for
+// several surfaces in any order: the cut may be re-ordered for another view (retained_cut.h).
+inline bool NeedsGradients(const Context& c, bool recording) {
+  return c.normals != NormalMode::kSmooth || (c.iso_count > 1 && (c.ordered || recording));
 }
 
 // The draw order of a leaf's `count` components, far to near (§4.3), into order[] as indices

@@ -55,6 +55,16 @@ TEST(DaemonFlags, ThoseItWouldMisreadStopItAtStart) {
   }
 }
 
+// --help is the daemon's output: written, exit 0; unwritable (a full disk), exit 1, as the CLI's.
+TEST(DaemonFlags, HelpThatCannotBeWrittenExitsOne) {
+  const std::string daemon = std::string("timeout 20 ") + ShellQuote(ISOSTREAMD_PATH);
+  EXPECT_EQ(RunCommand(daemon + " --help >/dev/null").code, 0);
+  // (RunCommand adds 2>&1 after the command: braces keep stderr on the pipe.)
+  const CommandResult full = RunCommand("{ " + daemon + " --help >/dev/full; }");
+  EXPECT_EQ(full.code, 1) << full.output;
+  EXPECT_NE(full.output.find("cannot write standard output"), std::string::npos) << full.output;
+}
+
 // A daemon that cannot serve as asked stops at start, saying why: a port another daemon holds
 // (exit 1: gRPC's default SO_REUSEPORT would have let both listen and split the clients
 // between them), and TLS files that cannot serve (exit 2; gRPC blamed the port for those).

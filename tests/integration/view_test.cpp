@@ -37,6 +37,17 @@ double Coverage(const render::Image& image) {
   return testing::Coverage(image, glm::vec3(render::kDefaultBackground));
 }
 
+// --help is the viewer's output: written, exit 0; unwritable (a full disk), exit 1, as the CLI's.
+TEST(View, HelpThatCannotBeWrittenExitsOne) {
+  EXPECT_EQ(View("--help >/dev/null").code, 0);
+  // (RunCommand adds 2>&1 after the command: braces keep stderr on the pipe.)
+  const ViewRun full =
+      View("{ " + ::isostream::testing::ShellQuote(ISOSTREAM_VIEW_PATH) + " --help >/dev/full; }",
+           false, true);
+  EXPECT_EQ(full.code, 1) << full.output;
+  EXPECT_NE(full.output.find("cannot write standard output"), std::string::npos) << full.output;
+}
+
 TEST(View, RendersStreamedFramesAndFailsClearly) {
   testing::ScratchDir dir;
   testing::DaemonProcess daemon;

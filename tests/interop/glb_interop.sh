@@ -36,3 +36,29 @@ check surfaces buckyball:65 0.05,0.15,0.25 0.005 2.5,1.8,3.1  # three surfaces, 
 check wide cayley:129 0 0 -2.5,1.8,3.1                        # over 65,535 vertices
 check clipped cayley:100 -0.5,0.5 0.002 0.1,0.2,0.3           # padded volume, eye inside
 check empty cayley:65 100 0 2.5,1.8,3.1                       # no surface: an empty scene
+
+# A NIfTI file in millimetres (xyzt_units 2): the node scales to glTF's meters, and the
+# validator must accept the document with that scale (the vertices stay in millimetres, as
+# the PLY's).
+node -e '
+const n = 17, c = (n - 1) / 2, h = Buffer.alloc(352), d = Buffer.alloc(4 * n * n * n);
+h.writeInt32LE(348, 0);
+[3, n, n, n, 1, 1, 1, 1].forEach((v, i) => h.writeInt16LE(v, 40 + 2 * i));
+h.writeInt16LE(16, 70); h.writeInt16LE(32, 72);  // float32
+[1, 0.5, 0.5, 0.5, 1, 1, 1, 1].forEach((v, i) => h.writeFloatLE(v, 76 + 4 * i));
+h.writeFloatLE(352, 108);
+h[123] = 2;  // NIFTI_UNITS_MM
+h.write("n+1\0", 344, "latin1");
+for (let z = 0, i = 0; z < n; ++z)
+  for (let y = 0; y < n; ++y)
+    for (let x = 0; x < n; ++x, ++i) d.writeFloatLE(Math.hypot(x - c, y - c, z - c), 4 * i);
+require("fs").writeFileSync(process.argv[1], Buffer.concat([h, d]));
+' "$work/mm.nii"
+check millimetres "$work/mm.nii" 5 0 20,15,25
+node -e '
+const b = require("fs").readFileSync(process.argv[1]);
+const doc = JSON.parse(b.subarray(20, 20 + b.readUInt32LE(12)).toString());
+const s = JSON.stringify(doc.nodes[0].scale);
+if (s !== "[0.001,0.001,0.001]") { console.error(`check_glb: node scale ${s}`); process.exit(1); }
+console.log("check_glb: node scale", s);
+' "$work/millimetres.glb"

@@ -170,6 +170,35 @@ TEST(RetainedCut, AnotherViewChangesTheOrder) {
   EXPECT_GT(moved, a.mesh.triangle_count() / 2);
 }
 
+// A cut recorded by an unordered frame of several surfaces keeps what orders a leaf's
+// components (its gradient), which that frame had no use for: a later sorted view re-ordered
+// from it draws as a fresh extraction does.
+TEST(RetainedCut, RecordedUnorderedThenSortedForAView) {
+  static const HierarchyPtr h = testing::MakeHierarchy(5, BlobsField);
+  const int mid = h->n() / 2;
+  for (const bool blocks : {true, false}) {
+    ExtractRequest r;
+    r.isovalues = {0.45f, 0.5f, 0.55f};  // close: many leaves cross two or three
+    r.eps = blocks ? 0.0 : 0.05 * h->eta(mid, mid, mid);
+    r.view = Perspective({-30, 70, 40});
+    r.order = DrawOrder::kNone;
+    r.blocks = blocks;
+    RetainedCut cut;
+    auto unordered = ExtractRetaining(*h, kXf, r, &cut);
+    ASSERT_TRUE(unordered.ok()) << unordered.status();
+    for (const View& view : {Perspective({70, -30, -20}), Orthographic({0.3, -1.0, 0.2})}) {
+      ExtractRequest sorted = r;
+      sorted.view = view;
+      sorted.order = DrawOrder::kBackToFront;
+      auto fresh = Extract(*h, kXf, sorted);
+      ASSERT_TRUE(fresh.ok()) << fresh.status();
+      auto reordered = Reorder(cut, view, DrawOrder::kBackToFront);
+      ASSERT_TRUE(reordered.ok()) << reordered.status();
+      ExpectSameDrawing(fresh->mesh, reordered->mesh, blocks ? "blocks" : "node by node");
+    }
+  }
+}
+
 // The observer hears of the re-ordered frame in contiguous prefixes, a few thousand triangles
 // at a time, as it does for an extraction: a stream cuts its first chunk from the first ones.
 TEST(RetainedCut, ObserverSeesContiguousPrefixes) {
