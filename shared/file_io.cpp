@@ -197,7 +197,8 @@ absl::Status CheckOutputPath(const std::string& path) {
   const size_t slash = made.rfind('/');
   const std::string folder = slash == std::string::npos ? "." : made.substr(0, slash + 1);
   if (::stat(folder.c_str(), &st) != 0 || !S_ISDIR(st.st_mode))
-    return absl::NotFoundError(absl::StrCat("cannot create ", path, ": no folder ", folder));
+    return absl::NotFoundError(absl::StrCat("cannot create ", path, ": no folder ", folder,
+                                            made == path ? "" : " (where its link points)"));
   if (exists) {
     if (::access(path.c_str(), W_OK) == 0) return absl::OkStatus();
     return absl::PermissionDeniedError(absl::StrCat("cannot write ", path, ": not writable"));

@@ -148,4 +148,12 @@ absl::StatusOr<ExtractRequest> MakeRequest(const ViewArgs& args, const Volume& v
   return r;
 }
 
+std::string UnitText(double meters_per_unit) {
+  const std::string meters = ShortestText(meters_per_unit) + " m";
+  if (meters_per_unit == 1) return meters;
+  if (meters_per_unit == 1e-3) return "mm (" + meters + ")";
+  if (meters_per_unit == 1e-6) return "µm (" + meters + ")";
+  return meters;
+}
+
 }  // namespace isostream::cli

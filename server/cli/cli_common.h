@@ -29,6 +29,10 @@ absl::Status CheckVolumeSpec(const VolumeArgs& args);
 // Loads, pads and builds (or reads the cached) hierarchy, with a progress line on big volumes.
 absl::StatusOr<PreparedVolume> Prepare(const VolumeArgs& args);
 
+// A volume's unit from its meters per unit (Volume::meters_per_unit, > 0): "mm (0.001 m)", "m",
+// or the meters alone for a unit without a name.
+std::string UnitText(double meters_per_unit);
+
 struct ViewArgs {
   std::string iso;
   double eps = -1;

@@ -93,7 +93,7 @@ int RunInfo(const VolumeArgs& args, const std::string& iso) {
   std::printf("spacing       %g %g %g\n", v.spacing[0], v.spacing[1], v.spacing[2]);
   std::printf("origin        %g %g %g\n", v.origin[0], v.origin[1], v.origin[2]);
   if (!v.orientation.empty()) std::printf("orientation   %s\n", v.orientation.c_str());
-  if (v.meters_per_unit > 0) std::printf("unit          %s m\n", ShortestText(v.meters_per_unit).c_str());
+  if (v.meters_per_unit > 0) std::printf("unit          %s\n", UnitText(v.meters_per_unit).c_str());
   // Every digit the samples hold: %g's six made 1e6 and 1e6 + 0.0625 one value.
   std::printf("value range   [%s, %s]\n", ShortestText(v.min_value).c_str(),
               ShortestText(v.max_value).c_str());

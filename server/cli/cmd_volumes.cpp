@@ -4,6 +4,7 @@
 #include <iostream>
 
 #include "client/net/session_client.h"
+#include "server/cli/cli_common.h"
 #include "server/cli/commands.h"
 #include "server/cli/connection_args.h"
 #include "shared/number_list.h"
@@ -33,7 +34,7 @@ void PrintInfo(const pb::VolumeInfo& v) {
               v.position_error() == 0 ? " (unquantized positions)" : "");
   if (!v.orientation().empty()) std::printf("  orientation     %s\n", v.orientation().c_str());
   if (v.meters_per_unit() > 0)
-    std::printf("  unit            %s m\n", ShortestText(v.meters_per_unit()).c_str());
+    std::printf("  unit            %s\n", UnitText(v.meters_per_unit()).c_str());
 }
 
 int RunVolumes(const VolumesArgs& args) {

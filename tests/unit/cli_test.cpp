@@ -109,7 +109,7 @@ TEST(Cli, GlbOfAVolumeInMillimetresIsInMeters) {
                                 volume_files::Samples(volume_files::Type::kUint8, nf.dims, false)));
   const CliRun info = Cli("info --volume " + nii + " --no-cache");
   ASSERT_EQ(info.code, 0) << info.output;
-  EXPECT_NE(info.output.find("unit          0.001 m"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("unit          mm (0.001 m)\n"), std::string::npos) << info.output;
   const std::string glb = TempPath("cli-mm.glb");
   ASSERT_EQ(Cli("extract --volume " + nii + " --iso 127.5 --eps 0 --no-cache -o " + glb).code, 0);
   auto bytes = ReadFileBytes(glb);

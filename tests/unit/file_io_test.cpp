@@ -188,7 +188,9 @@ TEST_F(FileIo, OutputPathsAreCheckedBeforeTheWork) {
 // frame extracted ("cannot create out.ply: No such file or directory", exit 1 after minutes).
 TEST_F(FileIo, ALinkToAFileInAMissingFolderIsRefusedBeforeTheWork) {
   fs::create_symlink(Path("missing/target.ply"), Path("link.ply"));
-  EXPECT_EQ(CheckOutputPath(Path("link.ply")).code(), absl::StatusCode::kNotFound);
+  const absl::Status link = CheckOutputPath(Path("link.ply"));
+  EXPECT_EQ(link.code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(link.message().find("missing/ (where its link points)"), std::string::npos) << link;
   // A link to a file not made yet in a folder that exists stays fine.
   fs::create_symlink(Path("target.ply"), Path("fine.ply"));
   EXPECT_TRUE(CheckOutputPath(Path("fine.ply")).ok());
