@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -55,20 +56,28 @@ TEST(Cli, ExtractWritesThePlyOfTheDirectExtractionInOrder) {
   EXPECT_EQ(ply->positions, direct->mesh.positions);
 }
 
+// A uint8 NIfTI file of the test samples (volume_files::Samples) in the test's scratch folder.
+std::string WriteUint8Nifti(const std::string& name, const std::array<int, 3>& dims,
+                            const std::array<float, 3>& pixdim, unsigned char xyzt_units = 0) {
+  volume_files::NiftiFile nf;
+  nf.dims = dims;
+  nf.datatype = 2;
+  nf.bitpix = 8;
+  nf.pixdim = pixdim;
+  nf.xyzt_units = xyzt_units;
+  const std::string path = TempPath(name);
+  volume_files::WriteBytes(
+      path, volume_files::Concat(nf.Header(), volume_files::Samples(volume_files::Type::kUint8,
+                                                                    nf.dims, false)));
+  return path;
+}
+
 // A .glb keeps positions as finely as the daemon's frames, 1/64 of the smallest voxel side: the
 // writer's default, 14 bits over the mesh's bounding cube, put two corners of 1.2% of
 // cayley:257's eps 0 triangles in one place (found by a reviewing helper), and is coarser still
 // where one axis is long in world units. Here a NIfTI volume with 64-unit slices.
 TEST(Cli, GlbPositionsAreWithinAVoxelSixtyFourth) {
-  volume_files::NiftiFile nf;
-  nf.dims = {33, 33, 17};
-  nf.datatype = 2;  // uint8
-  nf.bitpix = 8;
-  nf.pixdim = {1, 1, 64};
-  const std::string nii = TempPath("cli-slices.nii");
-  volume_files::WriteBytes(
-      nii, volume_files::Concat(nf.Header(),
-                                volume_files::Samples(volume_files::Type::kUint8, nf.dims, false)));
+  const std::string nii = WriteUint8Nifti("cli-slices.nii", {33, 33, 17}, {1, 1, 64});
   const std::string glb = TempPath("cli-slices.glb"), ply = TempPath("cli-slices.ply");
   const std::string args = "extract --volume " + nii + " --iso 127.5 --eps 0 --no-cache -o ";
   ASSERT_EQ(Cli(args + glb).code, 0);
@@ -97,16 +106,8 @@ TEST(Cli, GlbPositionsAreWithinAVoxelSixtyFourth) {
 // A volume in millimetres (NIfTI's xyzt_units) gives a .glb whose node scales to glTF's meters,
 // its vertices as in the PLY; `info` names the unit.
 TEST(Cli, GlbOfAVolumeInMillimetresIsInMeters) {
-  volume_files::NiftiFile nf;
-  nf.dims = {17, 17, 17};
-  nf.datatype = 2;  // uint8
-  nf.bitpix = 8;
-  nf.pixdim = {0.5, 0.5, 0.5};
-  nf.xyzt_units = 2 | 8;  // mm, s
-  const std::string nii = TempPath("cli-mm.nii");
-  volume_files::WriteBytes(
-      nii, volume_files::Concat(nf.Header(),
-                                volume_files::Samples(volume_files::Type::kUint8, nf.dims, false)));
+  const std::string nii =
+      WriteUint8Nifti("cli-mm.nii", {17, 17, 17}, {0.5, 0.5, 0.5}, 2 | 8);  // mm, s
   const CliRun info = Cli("info --volume " + nii + " --no-cache");
   ASSERT_EQ(info.code, 0) << info.output;
   EXPECT_NE(info.output.find("unit          mm (0.001 m)\n"), std::string::npos) << info.output;
