@@ -306,6 +306,91 @@ TEST(BudgetSearch, ACountThatNeverChangesTakesOnePass) {
   EXPECT_EQ(res.passes, 1);
 }
 
+// Exact over a sweep of budgets (every factor of 1.7 from 3 to 1e12) on power laws, plateaus,
+// steps, shallow counts and cliffs: the hardest of them takes 21 passes, so a search cut short
+// before 8 aimed passes and 16 bisecting ones ends at a code that fits but is not the smallest.
+TEST(BudgetSearch, ExactOverASweepOfBudgets) {
+  const uint32_t top = 0x4000;
+  std::vector<std::function<int64_t(uint32_t)>> shapes;
+  for (double p : {0.5, 1.0, 2.0, 3.0})
+    shapes.push_back([p](uint32_t k) {
+      return int64_t(std::min(20 + 1e3 / std::pow(std::max(EtaCodeEps(k), 1e-30), p), 1e15));
+    });
+  shapes.push_back([](uint32_t k) { return k >= 0x2000 ? int64_t(30) : int64_t(5'000'000); });
+  shapes.push_back(
+      [](uint32_t k) { return int64_t(1) << std::clamp(int(0x4000 - k) / 300, 0, 40); });
+  shapes.push_back([](uint32_t k) { return int64_t(1e6 / (1 + 0.001 * k)); });
+  shapes.push_back(
+      [](uint32_t k) { return k < 0x3000 ? int64_t(1e9 / (1 + k)) : int64_t(100 + (0x4000 - k)); });
+  int most = 0;
+  for (size_t i = 0; i < shapes.size(); ++i)
+    for (double b = 3; b < 1e12; b *= 1.7) {
+      const int64_t budget = int64_t(b);
+      const BudgetSearchResult res = Search(shapes[i], budget, top);
+      EXPECT_EQ(res.code, BruteForce(shapes[i], budget, top))
+          << "shape " << i << " budget " << budget;
+      EXPECT_LE(res.passes, 1 + 8 + 16) << "shape " << i << " budget " << budget;
+      most = std::max(most, res.passes);
+    }
+  EXPECT_GT(most, 20) << "no budget needed many passes: the sweep tests little";
+}
+
+// On a power law the first probe measures the slope, and the next is aimed at twice the
+// budget, between the budget and the limit: its curve holds the answer. Three passes (the top,
+// the probe, the aimed one), where the count at the top is well under the budget. The first
+// probe, aimed at a sixteenth of the budget with a slope at least as steep as the real one,
+// counts little.
+TEST(BudgetSearch, APowerLawTakesThreePassesAndACheapFirstProbe) {
+  const uint32_t top = 0x4000;
+  for (double p : {0.5, 1.0, 1.5, 2.0}) {
+    auto f = [p](uint32_t k) {
+      return int64_t(std::min(1e3 / std::pow(std::max(EtaCodeEps(k), 1e-30), p), 1e15));
+    };
+    for (int64_t budget : {int64_t{100'000}, int64_t{1'000'000}, int64_t{10'000'000}}) {
+      std::vector<uint32_t> codes;
+      const BudgetSearchResult res = Search(f, budget, top, &codes);
+      EXPECT_EQ(res.code, BruteForce(f, budget, top));
+      EXPECT_EQ(res.passes, 3) << "count ~ eps^-" << p << ", budget " << budget;
+      ASSERT_GE(codes.size(), 2u);
+      EXPECT_LE(f(codes[1]), budget / 14) << "count ~ eps^-" << p << ", budget " << budget;
+    }
+  }
+}
+
+// An empty coarsest mesh (a surface the coarse tetrahedra miss) aims as a one-triangle one
+// does: a count of 0 is taken as 1 on the log scale, not as minus infinity.
+TEST(BudgetSearch, AnEmptyCoarsestMeshAimsAsOneTriangleDoes) {
+  const uint32_t top = 0x4000;
+  auto with_top = [](int64_t at_top) {
+    return [at_top](uint32_t k) {
+      return k >= 0x3f00 ? at_top : int64_t(1e5 / std::max(EtaCodeEps(k), 1e-12));
+    };
+  };
+  for (int64_t budget : {int64_t{10}, int64_t{1000}, int64_t{100'000}, int64_t{10'000'000}}) {
+    std::vector<uint32_t> empty_codes, one_codes;
+    const BudgetSearchResult empty = Search(with_top(0), budget, top, &empty_codes);
+    const BudgetSearchResult one = Search(with_top(1), budget, top, &one_codes);
+    EXPECT_EQ(empty.code, one.code) << budget;
+    EXPECT_EQ(empty_codes, one_codes) << budget;
+  }
+}
+
+// A pass whose count is exactly the limit is within it: its curve runs from there to the
+// smallest code known to fit and holds the answer, so the search ends with it.
+TEST(BudgetSearch, ACountAtTheLimitIsWithinIt) {
+  const uint32_t top = 0x4000;
+  const int64_t budget = 1000;  // limit 4000
+  auto f = [](uint32_t k) {
+    return k >= 0x3000 ? int64_t(10) : k >= 0x0800 ? int64_t(4000) : int64_t(1'000'000'000);
+  };
+  std::vector<uint32_t> codes;
+  const BudgetSearchResult res = Search(f, budget, top, &codes);
+  EXPECT_EQ(res.code, 0x3000u);
+  ASSERT_GE(codes.size(), 2u);
+  ASSERT_EQ(f(codes[1]), 4 * budget) << "the first probe should land on the count at the limit";
+  EXPECT_EQ(res.passes, 2) << ::testing::PrintToString(codes);
+}
+
 TEST(BudgetSearch, NothingFitsEverythingFitsAndAStoppedPass) {
   auto grows = [](uint32_t k) { return int64_t(0x5000 - k); };
   BudgetSearchResult none = Search(grows, 10, 0x4000);  // 4096 at the top: over budget

@@ -200,6 +200,17 @@ TEST_F(FileIo, ALinkToAFileInAMissingFolderIsRefusedBeforeTheWork) {
   fs::create_symlink("../missing/deeper.ply", Path("sub/hop.ply"));
   fs::create_symlink("sub/hop.ply", Path("chain.ply"));
   EXPECT_EQ(CheckOutputPath(Path("chain.ply")).code(), absl::StatusCode::kNotFound);
+  // A longer chain (five links) is followed to its end too: only a loop is refused as one.
+  fs::create_symlink("missing/end.ply", Path("hop5.ply"));
+  for (int i = 4; i >= 1; --i)
+    fs::create_symlink("hop" + std::to_string(i + 1) + ".ply",
+                       Path("hop" + std::to_string(i) + ".ply"));
+  const absl::Status long_chain = CheckOutputPath(Path("hop1.ply"));
+  EXPECT_EQ(long_chain.code(), absl::StatusCode::kNotFound) << long_chain;
+  fs::create_symlink("hop5_fine.ply", Path("hop4_fine.ply"));
+  fs::create_symlink("hop4_fine.ply", Path("hop3_fine.ply"));
+  fs::create_symlink("hop3_fine.ply", Path("hop2_fine.ply"));
+  EXPECT_TRUE(CheckOutputPath(Path("hop2_fine.ply")).ok());
   fs::create_symlink("loop_b.ply", Path("loop_a.ply"));
   fs::create_symlink("loop_a.ply", Path("loop_b.ply"));
   const absl::Status loop = CheckOutputPath(Path("loop_a.ply"));

@@ -42,5 +42,36 @@ TEST(FrameNotes, ValuesFewFloatStepsApartAreSaid) {
   EXPECT_EQ(CoarseValuesNote(0.5f, 0.5f, "v"), "");
 }
 
+// A frame note says why a frame is over its budget, coarser than the user's budget asks, or
+// empty; an ordinary frame has none.
+TEST(FrameNotes, FramesThatLookWrongAreSaidWhy) {
+  // Over the budget: the coarsest mesh. Exactly at it fits.
+  EXPECT_EQ(FrameNote(12, 10, 10, 2.5, true),
+            "the coarsest mesh (eps 2.5) has 12 triangles, over the budget of 10: no coarser "
+            "mesh exists");
+  EXPECT_EQ(FrameNote(10, 10, 10, 2.5, true), "");
+  EXPECT_EQ(FrameNote(12, 0, 0, 2.5, true), "");  // no budget: nothing to be over
+  // The daemon's frame limit fitted the frame to less than the budget: said, where that made
+  // the mesh coarser (eps above 0); a frame that fits whole (eps 0) needed no lowering.
+  EXPECT_EQ(FrameNote(900, 5000, 1000, 0.01, true),
+            "the budget of 5000 triangles is over the daemon's frame limit: the frame was fitted "
+            "to its limit of 1000 (isostreamd --max-triangles)");
+  EXPECT_EQ(FrameNote(900, 5000, 1000, 0.0, true), "");
+  EXPECT_EQ(FrameNote(900, 1000, 1000, 0.01, true), "");  // fitted to the user's own budget
+  EXPECT_EQ(FrameNote(900, 5000, 0, 0.01, true), "");     // fitted not known
+  // Empty above eps 0 with a surface in the values: the budget, or else the eps, to change.
+  EXPECT_EQ(FrameNote(0, 1, 1, 4, true),
+            "the mesh is empty at eps 4: the next finer mesh is over the budget of 1 triangles; "
+            "a larger budget draws the surfaces");
+  EXPECT_EQ(FrameNote(0, 0, 0, 4, true),
+            "the mesh is empty at eps 4: a smaller eps (data units) refines the coarse "
+            "tetrahedra that miss the surfaces");
+  // Empty at eps 0, or with every isovalue outside the values (said by their own notes).
+  EXPECT_EQ(FrameNote(0, 0, 0, 0.0, true), "");
+  EXPECT_EQ(FrameNote(0, 0, 0, 4, false), "");
+  EXPECT_EQ(FrameNote(0, 1, 1, 4, false), "");
+  EXPECT_EQ(FrameNote(500, 1000, 1000, 0.5, true), "");
+}
+
 }  // namespace
 }  // namespace isostream

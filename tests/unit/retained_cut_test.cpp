@@ -133,6 +133,8 @@ TEST(RetainedCut, ReorderedForAnotherViewEqualsAFreshExtraction) {
             EXPECT_EQ(reordered->stats.triangles_per_surface, fresh->stats.triangles_per_surface);
             // Leaves with triangles are the mesh's, whatever the view; the walk visits records.
             EXPECT_EQ(reordered->stats.leaves, fresh->stats.leaves);
+            EXPECT_EQ(reordered->stats.triangles, fresh->stats.triangles);
+            EXPECT_EQ(reordered->stats.vertices, fresh->stats.vertices);
             EXPECT_GT(reordered->stats.tets_visited, 0);
             ExpectSameDrawing(fresh->mesh, reordered->mesh,
                               vol.name + " eps " + std::to_string(eps) + " view " +
@@ -305,8 +307,13 @@ TEST(RetainedCut, BadViewsAndStoppedExtractionsGiveClearErrors) {
   std::atomic<bool> cancel{true};
   ExtractObserver observer;
   observer.cancel = &cancel;
+  // Cancelled before it began: nothing is drawn, so the observer hears of no prefix.
+  size_t prefixes = 0;
+  observer.on_ready = [&](const OrderedMesh&, size_t, size_t) { ++prefixes; };
   auto cancelled = Reorder(cut, r.view, DrawOrder::kBackToFront, &observer);
   EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_EQ(prefixes, 0u);
+  observer.on_ready = nullptr;
   // An extraction that stops keeps nothing.
   auto stopped = Extract(*h, GridToWorld{}, r, &observer, &cut);
   EXPECT_EQ(stopped.status().code(), absl::StatusCode::kCancelled);
@@ -388,6 +395,43 @@ TEST(RetainedCut, AsksForRoomAsItsRecordsGrow) {
   EXPECT_EQ(refused.tree_bytes(), 0u);
   EXPECT_FALSE(refused.KeepMesh(std::move(drawn->mesh)));
   EXPECT_FALSE(refused.Serves(r));
+  // Released, the cut still asks: the next frame's recording is refused again, not granted
+  // without a word.
+  const int asked_before = asked.load();
+  auto again = Extract(*h, kXf, r, nullptr, &refused);
+  ASSERT_TRUE(again.ok());
+  EXPECT_GT(asked.load(), asked_before);
+  EXPECT_EQ(refused.tree_bytes(), 0u);
+}
+
+// What a cut holds: its tree and the kept frame's mesh, all of it (a daemon charges its
+// retained memory by this); cleared, the mesh is freed and the tree's buffers do not grow from
+// one frame to the next.
+TEST(RetainedCut, MemoryIsTheTreeAndTheWholeMesh) {
+  const auto h = testing::MakeHierarchy(5, CayleyField);
+  ExtractRequest r;
+  r.isovalues = {-0.3f, 0.05f, 0.4f};
+  r.view = Perspective({-30, 70, 40});
+  r.threads = 2;
+  RetainedCut cut;
+  auto res = ExtractRetaining(*h, kXf, r, &cut);
+  ASSERT_TRUE(res.ok());
+  const OrderedMesh& m = res->mesh;
+  ASSERT_GT(m.normals.size(), 0u);
+  const size_t mesh_bytes = (m.positions.size() + m.normals.size()) * sizeof(float) +
+                            m.triangles.size() * sizeof(uint32_t) + m.surface.size();
+  EXPECT_GE(cut.memory_bytes(), cut.tree_bytes() + mesh_bytes);
+  cut.Clear();
+  EXPECT_EQ(cut.memory_bytes(), cut.tree_bytes());
+  // The same frame recorded again and again into the cut: its buffers are reused.
+  ASSERT_TRUE(ExtractRetaining(*h, kXf, r, &cut).ok());
+  const size_t tree = cut.tree_bytes();
+  for (int i = 0; i < 40; ++i) ASSERT_TRUE(ExtractRetaining(*h, kXf, r, &cut).ok());
+  EXPECT_EQ(cut.tree_bytes(), tree);
+  auto reordered = Reorder(cut, Perspective({70, -30, -20}));
+  ASSERT_TRUE(reordered.ok());
+  EXPECT_GE(reordered->stats.total_ms, reordered->stats.extract_ms);
+  EXPECT_GT(reordered->stats.extract_ms, 0.0);
 }
 
 }  // namespace
