@@ -359,14 +359,20 @@ TEST(RetainedCut, ServesOnlyOnceItKeepsTheFrameItRecorded) {
   EXPECT_EQ(same_view->mesh.positions, frame.positions);
 }
 
-// A recording asks for each growth of its buffers as it happens: granted, it asks for what its
-// tree holds; refused, it stops and the cut is released, the frame itself drawn all the same.
-TEST(RetainedCut, AsksForRoomAsItsRecordsGrow) {
-  const auto h = testing::MakeHierarchy(5, CayleyField);
+// Three surfaces of the Cayley field, seen from outside, on two threads.
+ExtractRequest ThreeCayleySurfaces() {
   ExtractRequest r;
   r.isovalues = {-0.3f, 0.05f, 0.4f};
   r.view = Perspective({-30, 70, 40});
   r.threads = 2;
+  return r;
+}
+
+// A recording asks for each growth of its buffers as it happens: granted, it asks for what its
+// tree holds; refused, it stops and the cut is released, the frame itself drawn all the same.
+TEST(RetainedCut, AsksForRoomAsItsRecordsGrow) {
+  const auto h = testing::MakeHierarchy(5, CayleyField);
+  const ExtractRequest r = ThreeCayleySurfaces();
   RetainedCut cut;
   std::atomic<int64_t> granted{0};
   cut.SetReserve([&](int64_t bytes) {
@@ -409,10 +415,7 @@ TEST(RetainedCut, AsksForRoomAsItsRecordsGrow) {
 // one frame to the next.
 TEST(RetainedCut, MemoryIsTheTreeAndTheWholeMesh) {
   const auto h = testing::MakeHierarchy(5, CayleyField);
-  ExtractRequest r;
-  r.isovalues = {-0.3f, 0.05f, 0.4f};
-  r.view = Perspective({-30, 70, 40});
-  r.threads = 2;
+  const ExtractRequest r = ThreeCayleySurfaces();
   RetainedCut cut;
   auto res = ExtractRetaining(*h, kXf, r, &cut);
   ASSERT_TRUE(res.ok());
