@@ -184,8 +184,8 @@ absl::Status CheckOutputPath(const std::string& path) {
     int hops = 0;
     while (::lstat(made.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
       if (++hops > 40)
-        return absl::InvalidArgumentError(absl::StrCat("cannot create ", path,
-                                                       ": a loop of symbolic links"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("cannot create ", path, ": a loop of symbolic links"));
       char target[4096];
       const ssize_t n = ::readlink(made.c_str(), target, sizeof(target));
       if (n <= 0 || size_t(n) == sizeof(target)) break;

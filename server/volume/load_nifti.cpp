@@ -45,10 +45,14 @@ constexpr NiftiType kNiftiTypes[] = {
 // NIFTI_UNITS_UNKNOWN and the codes nifti1.h leaves undefined.
 double MetersPerUnit(unsigned char xyzt_units) {
   switch (xyzt_units & 0x07) {
-    case 1: return 1;
-    case 2: return 1e-3;
-    case 3: return 1e-6;
-    default: return 0;
+    case 1:
+      return 1;
+    case 2:
+      return 1e-3;
+    case 3:
+      return 1e-6;
+    default:
+      return 0;
   }
 }
 

@@ -67,8 +67,8 @@ std::string WriteUint8Nifti(const std::string& name, const std::array<int, 3>& d
   nf.xyzt_units = xyzt_units;
   const std::string path = TempPath(name);
   volume_files::WriteBytes(
-      path, volume_files::Concat(nf.Header(), volume_files::Samples(volume_files::Type::kUint8,
-                                                                    nf.dims, false)));
+      path, volume_files::Concat(
+                nf.Header(), volume_files::Samples(volume_files::Type::kUint8, nf.dims, false)));
   return path;
 }
 

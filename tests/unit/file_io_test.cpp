@@ -1,4 +1,6 @@
 // Whole-file writes (shared/file_io.h): a file is replaced whole or left as it was.
+#include "shared/file_io.h"
+
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/resource.h>
@@ -11,8 +13,6 @@
 #include <fstream>
 #include <string>
 #include <vector>
-
-#include "shared/file_io.h"
 
 namespace isostream {
 namespace {
