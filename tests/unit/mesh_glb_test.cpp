@@ -432,5 +432,130 @@ TEST(MeshGlb, ARefusedWriteNamesTheFile) {
   EXPECT_EQ(std::string(s.message()).rfind(path + ": ", 0), 0u) << s;
 }
 
+// At 65,536 vertices the largest index is 65,535, which glTF reserves in UNSIGNED_SHORT indices
+// (primitive restart): the indices are UNSIGNED_INT from there.
+TEST(MeshGlb, SixtyFiveThousandFiveHundredThirtySixVerticesTakeIntIndices) {
+  const OrderedMesh mesh = MakeGrid(255);  // 256 x 256 vertices
+  ASSERT_EQ(mesh.vertex_count(), 65536u);
+  const ParsedGlb glb = Parse(Serialize(mesh, GlbOptions{}));
+  const json& primitive = glb.document["meshes"][0]["primitives"][0];
+  EXPECT_EQ(glb.document["accessors"][primitive["indices"].get<size_t>()]["componentType"], 5125);
+}
+
+// The Draco buffer view holds at least 3 bytes per face plus 64 (glb_writer.h: Draco 1.5.5
+// decoders refuse a shorter one), however well the mesh compresses.
+TEST(MeshGlb, TheDracoViewIsPaddedToThreeBytesPerFacePlus64) {
+  GlbOptions coarse;  // few bits, no normals: Draco's bytes fall below the padding
+  coarse.codec.position_bits = 4;
+  int compressed_below = 0;
+  for (const int n : {2, 8, 30}) {
+    OrderedMesh mesh = MakeGrid(n);
+    mesh.normals.clear();
+    const ParsedGlb glb = Parse(Serialize(mesh, coarse));
+    const size_t length = glb.document["bufferViews"][0]["byteLength"].get<size_t>();
+    EXPECT_GE(length, 3 * mesh.triangle_count() + 64) << n;
+    EXPECT_EQ(glb.document["buffers"][0]["byteLength"].get<size_t>(), length);
+    compressed_below += length == 3 * mesh.triangle_count() + 64;
+  }
+  EXPECT_GT(compressed_below, 0) << "some mesh should compress below the padding";
+}
+
+// POSITION's bounds cover every vertex, the last one too.
+TEST(MeshGlb, BoundsCoverTheLastVertex) {
+  OrderedMesh mesh;
+  mesh.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0, 2.5f, 3.5f, 4.5f};
+  mesh.normals = {0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1};
+  mesh.triangles = {0, 1, 2, 1, 3, 2};
+  mesh.surface = {0, 0};
+  const ParsedGlb glb = Parse(Serialize(mesh, GlbOptions{}));
+  const json& primitive = glb.document["meshes"][0]["primitives"][0];
+  const json& position =
+      glb.document["accessors"][primitive["attributes"]["POSITION"].get<size_t>()];
+  const std::vector<float> high = position["max"].get<std::vector<float>>();
+  ASSERT_EQ(high.size(), 3u);
+  EXPECT_NEAR(high[0], 2.5f, 0.01f);
+  EXPECT_NEAR(high[1], 3.5f, 0.01f);
+  EXPECT_NEAR(high[2], 4.5f, 0.01f);
+}
+
+// An empty list of meshes is an empty mesh; two meshes are refused, not read as the first.
+TEST(MeshGlb, NoMeshesReadEmptyAndTwoAreRefused) {
+  const ParsedGlb glb = Parse(Serialize(MakeGrid(4), GlbOptions{}));
+  json none = glb.document;
+  none["meshes"] = json::array();
+  const absl::StatusOr<OrderedMesh> empty = ParseGlb(Container(none, glb.bin));
+  ASSERT_TRUE(empty.ok()) << empty.status();
+  EXPECT_TRUE(empty->empty());
+  json two = glb.document;
+  two["meshes"].push_back(two["meshes"][0]);
+  const absl::StatusOr<OrderedMesh> parsed = ParseGlb(Container(two, glb.bin));
+  ASSERT_FALSE(parsed.ok());
+  EXPECT_EQ(parsed.status().code(), absl::StatusCode::kUnimplemented);
+  EXPECT_EQ(parsed.status().message(), "GLB must hold exactly one mesh");
+}
+
+// What the reader takes as glTF says, and refuses otherwise: a primitive without a mode is a
+// triangle list (glTF's default); a mesh of two primitives is refused; a buffer view inside the
+// BIN chunk by its length but not by its offset plus length is outside it; the buffer is the
+// second chunk, not a later one.
+TEST(MeshGlb, PrimitivesViewsAndChunksAsGltfSays) {
+  const OrderedMesh mesh = MakeGrid(4);
+  const ParsedGlb glb = Parse(Serialize(mesh, GlbOptions{}));
+  auto edited = [&](const std::function<void(json&)>& edit) {
+    json document = glb.document;
+    edit(document);
+    return Container(document, glb.bin);
+  };
+  const absl::StatusOr<OrderedMesh> no_mode =
+      ParseGlb(edited([](json& d) { d["meshes"][0]["primitives"][0].erase("mode"); }));
+  ASSERT_TRUE(no_mode.ok()) << no_mode.status();
+  EXPECT_EQ(no_mode->triangle_count(), mesh.triangle_count());
+
+  auto refused = [&](const std::string& bytes, absl::StatusCode code, const std::string& message) {
+    const absl::StatusOr<OrderedMesh> parsed = ParseGlb(bytes);
+    ASSERT_FALSE(parsed.ok()) << message;
+    EXPECT_EQ(parsed.status().code(), code) << parsed.status();
+    EXPECT_EQ(parsed.status().message(), message);
+  };
+  refused(edited([](json& d) {
+            json& primitives = d["meshes"][0]["primitives"];
+            primitives.push_back(primitives[0]);
+          }),
+          absl::StatusCode::kUnimplemented, "GLB mesh must have exactly one primitive");
+  refused(edited([&](json& d) {
+            d["bufferViews"][0]["byteOffset"] = 4;
+            d["bufferViews"][0]["byteLength"] = glb.bin.size();
+          }),
+          absl::StatusCode::kInvalidArgument, "Draco buffer view lies outside the BIN chunk");
+
+  refused(edited([](json& d) { d["bufferViews"][0]["byteOffset"] = -4; }),
+          absl::StatusCode::kInvalidArgument, "bad bufferView byteOffset");
+
+  // The buffer as a third chunk, after a second that is not BIN.
+  std::string third = Container(glb.document, glb.bin, true, 0x5A5A5A5A);
+  const uint32_t length = uint32_t(glb.bin.size()), bin_type = 0x004E4942;
+  ASSERT_EQ(length % 4, 0u);
+  third.append(reinterpret_cast<const char*>(&length), 4);
+  third.append(reinterpret_cast<const char*>(&bin_type), 4);
+  third += glb.bin;
+  const uint32_t total = uint32_t(third.size());
+  std::memcpy(third.data() + 8, &total, 4);
+  const absl::StatusOr<GlbChunks> chunks = ParseGlbChunks(third);
+  ASSERT_TRUE(chunks.ok()) << chunks.status();
+  EXPECT_TRUE(chunks->bin.empty());
+  refused(third, absl::StatusCode::kInvalidArgument,
+          "Draco buffer view lies outside the BIN chunk");
+}
+
+// A header alone, whose length is the file's, is too short: a GLB holds a JSON chunk.
+TEST(MeshGlb, AHeaderAloneIsTooShort) {
+  std::string header;
+  for (const uint32_t v : {0x46546C67u, 2u, 12u})
+    header.append(reinterpret_cast<const char*>(&v), 4);
+  const absl::StatusOr<GlbChunks> chunks = ParseGlbChunks(header);
+  ASSERT_FALSE(chunks.ok());
+  EXPECT_EQ(chunks.status().message(), "too short for a GLB file");
+}
+
 }  // namespace
 }  // namespace isostream
