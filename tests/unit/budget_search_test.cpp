@@ -26,12 +26,7 @@ using testing::CayleyField;
 using testing::MakeHierarchy;
 using testing::SphereField;
 
-ExtractRequest Request(std::vector<float> iso) {
-  ExtractRequest r;
-  r.isovalues = std::move(iso);
-  r.view.eye = {40, -13, 57};
-  return r;
-}
+ExtractRequest Request(std::vector<float> iso) { return testing::CountingRequest(std::move(iso)); }
 
 TEST(EtaCodes, EdgesAndCodesRoundTrip) {
   EXPECT_EQ(EtaCodeEps(0), 0.0);

@@ -17,12 +17,7 @@ using extract_internal::CountCurve;
 using testing::CayleyField;
 using testing::MakeHierarchy;
 
-ExtractRequest Request(std::vector<float> iso) {
-  ExtractRequest r;
-  r.isovalues = std::move(iso);
-  r.view.eye = {40, -13, 57};
-  return r;
-}
+ExtractRequest Request(std::vector<float> iso) { return testing::CountingRequest(std::move(iso)); }
 
 // Only a stop below the curve's first code says where the count first changes below it: a
 // node at or above it (a culled one) says nothing, and must not shorten the claim to the

@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "server/extract/extract_request.h"
 #include "server/hierarchy/hierarchy.h"
 
 namespace isostream::testing {
@@ -29,6 +30,15 @@ inline PaddedSamples MakeSamples(int k, const std::function<float(double, double
 inline HierarchyPtr MakeHierarchy(int k, const std::function<float(double, double, double)>& f) {
   auto h = BuildHierarchy(MakeSamples(k, f));
   return h.ok() ? *h : nullptr;
+}
+
+// A request for these isovalues seen from (40, -13, 57), outside the test volumes: what the
+// count and budget tests ask of a hierarchy.
+inline ExtractRequest CountingRequest(std::vector<float> iso) {
+  ExtractRequest r;
+  r.isovalues = std::move(iso);
+  r.view.eye = {40, -13, 57};
+  return r;
 }
 
 inline float SphereField(double x, double y, double z) {
